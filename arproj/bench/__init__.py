@@ -1,0 +1,80 @@
+"""Benchmarks: one module per subject, each with `run(quick: bool = False, seed: int = 0) -> BenchTable`.
+
+`arproj bench NAME` runs one (a module here is a benchmark by being here); `arproj bench all` runs them all.
+Every benchmark runs its peer on the same input in the same run and reports the ratio.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import pkgutil
+from dataclasses import asdict, dataclass, field
+from types import ModuleType
+from typing import Any
+
+from rich.table import Table
+
+from arproj.console import console
+
+
+@dataclass
+class BenchTable:
+    """A benchmark's result: a titled table, notes printed under it, and headline figures for `bench all`.
+
+    headline: {label: {"arproj": value, "peer": value, "peer_name": str, "unit": str, "target": str,
+    "met": bool | None}}
+    """
+
+    name: str
+    title: str
+    columns: list[str]
+    rows: list[list[Any]]
+    notes: list[str] = field(default_factory=list)
+    headline: dict[str, dict[str, Any]] = field(default_factory=dict)
+    environment: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=2, default=_json_default)
+
+    def print(self) -> None:
+        table = Table(title=self.title, title_justify="left")
+        for col in self.columns:
+            table.add_column(col, justify="left" if col == self.columns[0] else "right")
+        for row in self.rows:
+            table.add_row(*(_fmt(v) for v in row))
+        console.print(table)
+        for note in self.notes:
+            console.print(f"  {note}", highlight=False)
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        if v != v:  # NaN
+            return "–"
+        if abs(v) >= 1000:
+            return f"{v:,.0f}"
+        if abs(v) >= 100:
+            return f"{v:.1f}"
+        if abs(v) >= 1:
+            return f"{v:.2f}"
+        return f"{v:.3g}"
+    if isinstance(v, bool):
+        return "yes" if v else "NO"
+    return str(v)
+
+
+def _json_default(v: Any) -> Any:
+    import numpy as np
+
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    raise TypeError(type(v).__name__)
+
+
+def benchmark_modules() -> dict[str, ModuleType]:
+    """name -> module for every benchmark in this package."""
+    return {m.name: importlib.import_module(f"{__name__}.{m.name}")
+            for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_")}

@@ -1,0 +1,62 @@
+"""`arproj bench NAME` for every module in arproj.bench, and `arproj bench all`."""
+
+from __future__ import annotations
+
+import json
+
+import typer
+
+from arproj.bench import BenchTable, benchmark_modules
+from arproj.console import console, err_console
+
+
+def _command(name: str, module):
+    def command(
+        as_json: bool = typer.Option(False, "--json", help="Print the results as JSON instead of a table."),
+        quick: bool = typer.Option(False, "--quick", help="Fewer trials, for a fast check (figures are "
+                                   "noisier; targets are judged on the full run)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the simulated inputs."),
+    ) -> None:
+        table: BenchTable = module.run(quick=quick, seed=seed)
+        if as_json:
+            print(table.to_json())
+        else:
+            table.print()
+
+    command.__doc__ = (module.__doc__ or name).strip()
+    return command
+
+
+def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+    modules = benchmark_modules()
+    for name, module in modules.items():
+        bench_app.command(name)(_command(name, module))
+
+    @bench_app.command("all")
+    def bench_all(
+        as_json: bool = typer.Option(False, "--json", help="Print every result as one JSON document."),
+        quick: bool = typer.Option(False, "--quick", help="Fewer trials in every benchmark."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the simulated inputs."),
+    ) -> None:
+        """Run every benchmark and print one summary table of the headline figures."""
+        from rich.table import Table
+
+        results: dict[str, BenchTable] = {}
+        for name, module in modules.items():
+            err_console.print(f"[bold]bench {name}[/] …")
+            results[name] = module.run(quick=quick, seed=seed)
+            if not as_json:
+                results[name].print()
+        if as_json:
+            print(json.dumps({n: json.loads(t.to_json()) for n, t in results.items()}, indent=2))
+            return
+        summary = Table(title="arproj bench all — headline figures", title_justify="left")
+        for col in ("benchmark", "figure", "arproj", "peer", "peer is", "target", "met"):
+            summary.add_column(col)
+        for name, table in results.items():
+            for label, h in table.headline.items():
+                met = h.get("met")
+                summary.add_row(name, label, f"{h.get('arproj', '')}{h.get('unit', '')}",
+                                f"{h.get('peer', '–')}", str(h.get("peer_name", "")), str(h.get("target", "")),
+                                "–" if met is None else ("yes" if met else "NO"))
+        console.print(summary)

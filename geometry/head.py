@@ -1,0 +1,76 @@
+"""Kinematic model of the 3-DOF pan/tilt(/roll) head that carries the projector.
+
+Product of exponentials: with every joint at its zero, the projector sits at T_robot_from_projector_zero;
+joint i turns about the line through points[i] along axes[i] (both in the robot frame at the zero pose):
+
+    T_robot_from_projector(θ) = E1(θ1 + o1) · E2(θ2 + o2) · E3(θ3 + o3) · T_robot_from_projector_zero
+
+where Ei(a) rotates by a about joint i's line and oi is joint i's zero offset (encoder zero error).
+The simulated site uses it as truth; calibration fits it from measured projector poses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from geometry.errors import InputError
+from geometry.poses import make_pose, rotation_about
+
+JOINT_NAMES = ("pan", "tilt", "roll")
+
+
+def _about_line(axis: NDArray[np.float64], point: NDArray[np.float64], angle_rad: float) -> NDArray[np.float64]:
+    R = rotation_about(axis, angle_rad)
+    return make_pose(R, point - R @ point)
+
+
+@dataclass
+class HeadModel:
+    """axes, points: (3, 3) in the robot frame; zero_offsets_deg: (3,); T_robot_from_projector_zero: 4x4."""
+
+    axes: NDArray[np.float64]
+    points: NDArray[np.float64]
+    T_robot_from_projector_zero: NDArray[np.float64]
+    zero_offsets_deg: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self) -> None:
+        self.axes = np.asarray(self.axes, dtype=np.float64).reshape(3, 3)
+        norms = np.linalg.norm(self.axes, axis=1)
+        if np.any(norms < 1e-9):
+            raise InputError("head model: a joint axis has zero length")
+        self.axes = self.axes / norms[:, None]
+        self.points = np.asarray(self.points, dtype=np.float64).reshape(3, 3)
+        self.T_robot_from_projector_zero = np.asarray(self.T_robot_from_projector_zero, dtype=np.float64)
+        self.zero_offsets_deg = np.asarray(self.zero_offsets_deg, dtype=np.float64).reshape(3)
+
+    def T_robot_from_projector(self, angles_deg: ArrayLike) -> NDArray[np.float64]:
+        """Projector pose for the (pan, tilt, roll) joint angles in degrees."""
+        a = np.radians(np.asarray(angles_deg, dtype=np.float64).reshape(3) + self.zero_offsets_deg)
+        T = np.eye(4)
+        for i in range(3):
+            T = T @ _about_line(self.axes[i], self.points[i], a[i])
+        return T @ self.T_robot_from_projector_zero
+
+    def to_dict(self) -> dict:
+        return {
+            "model": "product_of_exponentials",
+            "joints": list(JOINT_NAMES),
+            "axes": self.axes.tolist(),
+            "points_m": self.points.tolist(),
+            "zero_offsets_deg": self.zero_offsets_deg.tolist(),
+            "T_robot_from_projector_zero": self.T_robot_from_projector_zero.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict, source: str = "head model") -> HeadModel:
+        try:
+            return cls(axes=d["axes"], points=d["points_m"],
+                       T_robot_from_projector_zero=np.asarray(d["T_robot_from_projector_zero"], dtype=float),
+                       zero_offsets_deg=d.get("zero_offsets_deg", [0.0, 0.0, 0.0]))
+        except KeyError as err:
+            raise InputError(f"{source}: key {err.args[0]!r} is missing") from None
+        except (TypeError, ValueError) as err:
+            raise InputError(f"{source}: malformed ({err})") from None

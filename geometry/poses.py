@@ -1,0 +1,81 @@
+"""4x4 homogeneous poses named T_dst_from_src, and the one place OpenCV's rvec/tvec are converted.
+
+Points are (n, 3) float64 arrays in metres; p_dst = T_dst_from_src @ p_src, so chains read right to left.
+"""
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Pose = NDArray[np.float64]
+
+# OpenCV camera (x right, y down, z forward) to OpenGL camera (x right, y up, z backward).
+T_GL_FROM_CV: Pose = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+def make_pose(R: ArrayLike | None = None, t: ArrayLike | None = None) -> Pose:
+    """A 4x4 pose from a 3x3 rotation and a translation (metres)."""
+    T = np.eye(4)
+    if R is not None:
+        T[:3, :3] = np.asarray(R, dtype=np.float64).reshape(3, 3)
+    if t is not None:
+        T[:3, 3] = np.asarray(t, dtype=np.float64).reshape(3)
+    return T
+
+
+def invert(T: ArrayLike) -> Pose:
+    """Inverse of a rigid pose (exact, without a general matrix inverse)."""
+    T = np.asarray(T, dtype=np.float64)
+    R, t = T[:3, :3], T[:3, 3]
+    return make_pose(R.T, -R.T @ t)
+
+
+def transform_points(T: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
+    """Apply pose T to points (n, 3) or (3,); returns the same shape."""
+    T = np.asarray(T, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64)
+    return p @ T[:3, :3].T + T[:3, 3]
+
+
+def rotation_about(axis: ArrayLike, angle_rad: float) -> NDArray[np.float64]:
+    """3x3 rotation by angle_rad about a (not necessarily unit) axis, right-handed."""
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    R, _ = cv2.Rodrigues(a * float(angle_rad))
+    return R
+
+
+def pose_from_rvec_tvec(rvec: ArrayLike, tvec: ArrayLike) -> Pose:
+    """OpenCV's (rvec, tvec) as a pose. For solvePnP/calibrateCamera they are T_camera_from_board."""
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3))
+    return make_pose(R, np.asarray(tvec, dtype=np.float64).reshape(3))
+
+
+def rvec_tvec_from_pose(T: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The inverse of pose_from_rvec_tvec: (rvec (3,), tvec (3,))."""
+    T = np.asarray(T, dtype=np.float64)
+    rvec, _ = cv2.Rodrigues(T[:3, :3])
+    return rvec.reshape(3), T[:3, 3].copy()
+
+
+def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> Pose:
+    """T_world_from_camera for an OpenCV camera at eye looking at target, image 'up' towards up."""
+    eye = np.asarray(eye, dtype=np.float64)
+    z = np.asarray(target, dtype=np.float64) - eye
+    z /= np.linalg.norm(z)
+    up = np.asarray(up, dtype=np.float64)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError("look_at: viewing direction is parallel to up")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)  # image y points down
+    return make_pose(np.column_stack([x, y, z]), eye)
+
+
+def rotation_angle_deg(R_a: ArrayLike, R_b: ArrayLike | None = None) -> float:
+    """Angle (degrees) of the rotation R_a, or of the rotation between R_a and R_b."""
+    R = np.asarray(R_a, dtype=np.float64)[:3, :3]
+    if R_b is not None:
+        R = R.T @ np.asarray(R_b, dtype=np.float64)[:3, :3]
+    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    return float(np.degrees(np.arccos(c)))

@@ -1,0 +1,36 @@
+"""Fixtures shared by the whole suite."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def shared_data_dir() -> Path:
+    """../shared/data beside the repository, or where ARPROJ_DATA points."""
+    return Path(os.environ.get("ARPROJ_DATA", REPO.parent / "shared" / "data"))
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """The real-image folder; tests that need it skip with the reason when it is absent."""
+    path = shared_data_dir()
+    if not path.is_dir():
+        pytest.skip(f"real calibration images not found at {path} (set ARPROJ_DATA or place ../shared beside "
+                    "the repository)")
+    return path
+
+
+@pytest.fixture(scope="session")
+def gl_context() -> Iterator[object]:
+    """One EGL context for the whole session (llvmpipe is enough), released at the end."""
+    from arproj.gl import create_context
+
+    ctx = create_context()
+    yield ctx
+    ctx.release()

@@ -1,0 +1,53 @@
+import cv2
+import numpy as np
+import pytest
+
+from geometry import InputError, invert, look_at, make_pose, pose_from_rvec_tvec, rotation_about
+from geometry.frames import parse_pose_name
+from geometry.poses import rotation_angle_deg, rvec_tvec_from_pose, transform_points
+
+
+def test_invert_and_chain_read_right_to_left() -> None:
+    rng = np.random.default_rng(1)
+    T_a_from_b = make_pose(rotation_about(rng.normal(size=3), 0.7), rng.normal(size=3))
+    T_b_from_c = make_pose(rotation_about(rng.normal(size=3), -1.2), rng.normal(size=3))
+    p_c = rng.normal(size=(5, 3))
+    p_a = transform_points(T_a_from_b @ T_b_from_c, p_c)
+    np.testing.assert_allclose(transform_points(T_a_from_b, transform_points(T_b_from_c, p_c)), p_a)
+    np.testing.assert_allclose(invert(T_a_from_b) @ T_a_from_b, np.eye(4), atol=1e-12)
+
+
+def test_rvec_tvec_is_T_camera_from_board_as_opencv_projects() -> None:
+    rvec, tvec = np.array([0.1, -0.3, 0.2]), np.array([0.05, -0.02, 1.5])
+    board = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0.02]], dtype=float)
+    K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
+    uv_cv, _ = cv2.projectPoints(board, rvec, tvec, K, None)
+    p_cam = transform_points(pose_from_rvec_tvec(rvec, tvec), board)
+    uv = (p_cam[:, :2] / p_cam[:, 2:]) * 800 + [320, 240]
+    np.testing.assert_allclose(uv, uv_cv.reshape(-1, 2), atol=1e-9)
+    r2, t2 = rvec_tvec_from_pose(pose_from_rvec_tvec(rvec, tvec))
+    np.testing.assert_allclose(r2, rvec, atol=1e-12)
+    np.testing.assert_allclose(t2, tvec)
+
+
+def test_look_at_puts_target_on_the_optical_axis_with_image_up_towards_up() -> None:
+    T_world_from_cam = look_at([2.0, -3.0, 1.5], [0.0, 0.0, 1.0], up=[0, 0, 1])
+    target_cam = transform_points(invert(T_world_from_cam), [0.0, 0.0, 1.0])
+    np.testing.assert_allclose(target_cam[:2], 0, atol=1e-12)
+    assert target_cam[2] > 0
+    above = transform_points(invert(T_world_from_cam), [0.0, 0.0, 2.0])
+    assert above[1] < 0  # image y points down, so 'up' in the world is negative y
+
+
+def test_rotation_angle() -> None:
+    assert rotation_angle_deg(rotation_about([0, 0, 1], np.radians(30))) == pytest.approx(30)
+    R = rotation_about([1, 2, 3], 0.4)
+    assert rotation_angle_deg(R, R @ rotation_about([0, 1, 0], np.radians(2))) == pytest.approx(2)
+
+
+def test_pose_names_use_known_frames() -> None:
+    assert parse_pose_name("T_wall_from_projector") == ("wall", "projector")
+    with pytest.raises(InputError, match="unknown frame 'beamer'"):
+        parse_pose_name("T_wall_from_beamer")
+    with pytest.raises(InputError, match="T_<dst>_from_<src>"):
+        parse_pose_name("wall_to_projector")
