@@ -1,0 +1,132 @@
+"""`arproj scan`: scan a wall (simulated site) into a crash-safe scan log; `--resume LOG` continues one."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from geometry.errors import InputError
+
+
+def _fmt_duration(seconds: float) -> str:
+    seconds = round(seconds)
+    return f"{seconds // 3600}:{seconds % 3600 // 60:02d}:{seconds % 60:02d}"
+
+
+def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+    @app.command("scan")
+    def scan(
+        wall: Path = typer.Option(None, "--wall", help="Wall description file (YAML/JSON), or the name of a "
+                                  "shipped wall (paper_test_plate, small_test_wall, drywall_studs, "
+                                  "demo_brick_wall). With --resume it is checked against the log."),
+        log: Path = typer.Option(None, "--log", help="Scan log to write (SQLite)."),
+        resume: Path = typer.Option(None, "--resume", help="Continue the scan recorded in this log."),
+        sim: bool = typer.Option(False, "--sim", help="Scan the simulated site (device simulators on "
+                                 "socket:// URLs, the same code path as hardware)."),
+        plan: str = typer.Option("adaptive", "--plan", help="dense (raster, 1 cm lines: the paper's way) or "
+                                 "adaptive (coarse grid, then confirm and trace)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the simulation (robot errors, sensor noise)."),
+        faults: float = typer.Option(0.0, "--faults", help="Simulation: probability of a fault per device "
+                                     "output line (garbage, truncation, drops, disconnects)."),
+        fast: bool = typer.Option(False, "--fast", help="Simulation: evaluate the site in-process instead of "
+                                  "through the serial simulators (identical samples, faster)."),
+        overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing log at --log."),
+    ) -> None:
+        """Scan a wall: frames, passes and every sample go to a SQLite log, batch by batch (kill -9 safe)."""
+        from arproj.console import console, progress_bar
+        from scanner.devices import simulated_devices
+        from scanner.log import ScanLog
+        from scanner.plan import DriveConfig
+        from scanner.run import (
+            DirectBackend,
+            config_from_meta,
+            open_for_resume,
+            run_scan,
+            scan_meta,
+            simulated_site,
+        )
+        from scanner.sensor_model import SensorConfig
+        from scanner.sim.devices import FaultConfig
+        from scanner.wall import load_wall
+
+        if not 0.0 <= faults <= 0.5:
+            raise InputError(f"--faults = {faults}: must be a probability between 0 and 0.5")
+        if resume is not None:
+            if log is not None:
+                raise InputError("give either --resume LOG or --log LOG, not both")
+            scan_log, the_wall = open_for_resume(resume, wall)
+            meta = scan_log.meta
+            if meta.get("seed") is None:
+                raise InputError(f"{resume}: the log was not made on the simulated site; resuming hardware scans "
+                                 "needs the devices' URLs, which this command does not take yet")
+            sensor, drives = config_from_meta(meta)
+            plan_kind, plan_options, seed = meta["plan"]["kind"], meta["plan"], int(meta["seed"])
+            if meta.get("status") == "complete":
+                console.print(f"{resume}: scan already complete ({scan_log.pass_count()} passes)")
+                return
+        else:
+            if wall is None or log is None:
+                raise InputError("arproj scan needs --wall FILE and --log LOG (or --resume LOG)")
+            if not sim:
+                raise InputError("only the simulated site can be scanned from this command: add --sim",
+                                 "real devices are driven by scanner.devices.DeviceBackend with their serial URLs")
+            if plan not in ("dense", "adaptive"):
+                raise InputError(f"--plan = {plan!r}: use dense or adaptive")
+            from scanner.wall import shipped_walls
+
+            if not wall.exists() and wall.stem in shipped_walls() and wall.parent == Path():
+                wall = shipped_walls()[wall.stem]  # a shipped wall by name, e.g. --wall paper_test_plate
+            the_wall = load_wall(wall)
+            sensor, drives = SensorConfig(), DriveConfig()
+            plan_kind, plan_options = plan, None
+            from scanner.plan import make_planner
+
+            planner = make_planner(plan, the_wall, drives, sensor.hysteresis_m)
+            planner.frames()  # reach check before a log is created
+            scan_log = ScanLog.create(log, scan_meta(the_wall, str(wall), planner.describe(), sensor, drives,
+                                                     seed, simulated=True), overwrite=overwrite)
+        world, robot = simulated_site(the_wall, sensor, drives, seed)
+        with progress_bar() as bar:
+            task = bar.add_task("scanning", total=1.0)
+
+            def progress(t: float, total: float, passes: int) -> None:
+                bar.update(task, completed=t, total=total,
+                           description=f"scan {_fmt_duration(t)}/~{_fmt_duration(total)}")
+
+            if fast:
+                result = run_scan(the_wall, DirectBackend(world), robot, plan_kind=plan_kind,
+                                  plan_options=plan_options, sensor=sensor, drives=drives, log=scan_log,
+                                  progress=progress)
+                recovered = 0
+            else:
+                with simulated_devices(world, FaultConfig(rate=faults, seed=seed)) as (backend, g, s):
+                    result = run_scan(the_wall, backend, robot, plan_kind=plan_kind, plan_options=plan_options,
+                                      sensor=sensor, drives=drives, log=scan_log, progress=progress)
+                    recovered = backend.faults_recovered
+                    injected = sum((g.faults.counts + s.faults.counts).values())
+                if faults > 0:
+                    console.print(f"device faults injected: {injected}, recovered: {recovered}")
+        n = len(result.samples.get("time_s", []))
+        console.print(f"{scan_log.path}: {result.n_frames} frames, {result.n_passes} passes "
+                      f"({result.measured_passes} measured now), {n} samples; simulated scan time "
+                      f"{_fmt_duration(result.scan_time_s)} ({plan_kind})")
+        scan_log.close()
+
+    @app.command("scan-plot")
+    def scan_plot(
+        log: Path = typer.Argument(None, help="Scan log to draw."),
+        out: Path = typer.Option(Path("scan.png"), "--out", help="PNG file to write."),
+        paper: bool = typer.Option(False, "--paper", help="Instead: re-make the paper's figures 5 and 6 "
+                                   "(inductive and AC along the test plate, three runs) with the simulator."),
+    ) -> None:
+        """Draw a scan log's inductive and AC readings on the wall (PNG), or the paper's figures 5 and 6."""
+        from arproj.console import console
+        from scanner.figures import plot_log, plot_paper_figures
+
+        if paper:
+            console.print(f"wrote {plot_paper_figures(out)}")
+            return
+        if log is None:
+            raise InputError("arproj scan-plot needs a scan LOG (or --paper)")
+        console.print(f"wrote {plot_log(log, out)}")

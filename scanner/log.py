@@ -1,0 +1,280 @@
+"""The scan log: every sample of a scan in one SQLite file, safe against crashes.
+
+File format (SQLite 3, journal_mode=WAL, synchronous=FULL). One transaction per batch; a batch is one whole
+pass (its `passes` row and all its `samples` rows) or one frame row. A crash, power loss or `kill -9` therefore
+loses at most the batch that was being written; what is in the file is always whole passes. Format version
+`arproj-scanlog/1` (meta key `format`).
+
+Coordinates: wall metres (x right, y up from the wall's lower-left corner, the `wall` frame) unless a name says
+`drive_`: drive coordinates (u, v) are metres along the xy linear drives from the frame's origin (GRBL
+machine position / 1000). A frame pose (x, y, phi) maps drive to wall coordinates:
+    [x_wall, y_wall] = [x, y] + R(phi) @ [u, v],  R(phi) = [[cos, -sin], [sin, cos]], phi in radians.
+
+Tables
+  meta(key TEXT PRIMARY KEY, value TEXT)        values are JSON:
+      format            "arproj-scanlog/1"
+      created           ISO-8601 UTC time the log was created
+      wall_fingerprint  sha256 of the wall content (scanner.wall.Wall.fingerprint); a scan never mixes walls
+      wall_name, wall_path, wall_width_m, wall_height_m
+      wall_json         the wall description itself (simulation only: the truth the simulator scanned;
+                        absent/null for real hardware)
+      plan              {"kind": "dense"|"adaptive", ...planner parameters}
+      sensor            sensor configuration (sample rate, value scale, hysteresis_m, noise, ...)
+      drives            drive configuration (travel_m, max speed, acceleration, scan speed)
+      seed              integer seed of the simulation (null for real hardware)
+      status            "running" or "complete"
+  frames(frame_id INTEGER PRIMARY KEY, time_s REAL,           time_s: scan time the robot stood ready
+         cmd_x_m, cmd_y_m, cmd_phi_rad,                       frame pose the planner commanded
+         est_x_m, est_y_m, est_phi_rad, cov_json TEXT,        localization estimate and its 3x3 covariance
+                                                              (row-major JSON, order x, y, phi; m², rad²)
+         true_x_m, true_y_m, true_phi_rad)                    simulation truth (NULL on real hardware)
+  passes(pass_id INTEGER PRIMARY KEY, frame_id, stage TEXT,   stage: raster | coarse | confirm | trace
+         axis TEXT, direction INTEGER,                        axis 'x' (moves along drive u) or 'y' (along v);
+                                                              direction +1 increasing, -1 decreasing coordinate
+         start_u_m, start_v_m, end_u_m, end_v_m,              drive coordinates of the measuring move
+         t_start_s, t_end_s, n_samples)
+  samples(seq INTEGER PRIMARY KEY,                            unique, consecutive over the whole scan
+          time_s REAL, frame_id INTEGER, pass_id INTEGER,     time_s: scan time in seconds (simulated
+                                                              clock in simulation)
+          drive_u_m, drive_v_m,                               drive position at the sample
+          cmd_x_m, cmd_y_m,                                   commanded position on the wall (commanded
+                                                              frame pose ∘ drive position)
+          x_m, y_m,                                           measured position on the wall (localization
+                                                              estimate ∘ drive position) — use these
+          true_x_m, true_y_m,                                 simulation truth, NULL on real hardware
+          axis INTEGER, direction INTEGER,                    axis 0 = x/u, 1 = y/v; direction ±1 of motion
+          inductive REAL, capacitive REAL, ac REAL)           readings, display units 0..1 (device counts
+                                                              / 1000), as in the paper's figures 5 and 6
+
+Reader API: `ScanLog.open(path)`; `.meta` (dict), `.samples()` -> dict of numpy arrays (one per column above,
+float64 except seq/frame_id/pass_id/axis/direction int64; NULL -> NaN), `.frames()` -> dict of arrays with
+`cov` (n, 3, 3), `.passes()` -> dict of arrays (stage/axis as numpy str arrays).
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from collections.abc import Mapping
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from geometry.errors import InputError
+
+FORMAT = "arproj-scanlog/1"
+
+SAMPLE_COLUMNS: tuple[str, ...] = (
+    "seq", "time_s", "frame_id", "pass_id", "drive_u_m", "drive_v_m", "cmd_x_m", "cmd_y_m", "x_m", "y_m",
+    "true_x_m", "true_y_m", "axis", "direction", "inductive", "capacitive", "ac",
+)
+INT_SAMPLE_COLUMNS = frozenset({"seq", "frame_id", "pass_id", "axis", "direction"})
+FRAME_COLUMNS: tuple[str, ...] = (
+    "frame_id", "time_s", "cmd_x_m", "cmd_y_m", "cmd_phi_rad", "est_x_m", "est_y_m", "est_phi_rad", "cov_json",
+    "true_x_m", "true_y_m", "true_phi_rad",
+)
+PASS_COLUMNS: tuple[str, ...] = (
+    "pass_id", "frame_id", "stage", "axis", "direction", "start_u_m", "start_v_m", "end_u_m", "end_v_m",
+    "t_start_s", "t_end_s", "n_samples",
+)
+
+_SCHEMA = f"""
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS frames (frame_id INTEGER PRIMARY KEY, time_s REAL NOT NULL,
+    cmd_x_m REAL NOT NULL, cmd_y_m REAL NOT NULL, cmd_phi_rad REAL NOT NULL,
+    est_x_m REAL NOT NULL, est_y_m REAL NOT NULL, est_phi_rad REAL NOT NULL, cov_json TEXT NOT NULL,
+    true_x_m REAL, true_y_m REAL, true_phi_rad REAL);
+CREATE TABLE IF NOT EXISTS passes (pass_id INTEGER PRIMARY KEY, frame_id INTEGER NOT NULL, stage TEXT NOT NULL,
+    axis TEXT NOT NULL, direction INTEGER NOT NULL, start_u_m REAL NOT NULL, start_v_m REAL NOT NULL,
+    end_u_m REAL NOT NULL, end_v_m REAL NOT NULL, t_start_s REAL NOT NULL, t_end_s REAL NOT NULL,
+    n_samples INTEGER NOT NULL);
+CREATE TABLE IF NOT EXISTS samples ({", ".join(
+    c + (" INTEGER PRIMARY KEY" if c == "seq" else " INTEGER NOT NULL" if c in INT_SAMPLE_COLUMNS else " REAL")
+    for c in SAMPLE_COLUMNS)});
+CREATE INDEX IF NOT EXISTS samples_by_pass ON samples(pass_id);
+"""
+
+
+class ScanLog:
+    """A scan log file (see the module docstring for the format). Use `create` to write, `open` to read."""
+
+    def __init__(self, path: Path, connection: sqlite3.Connection, writable: bool) -> None:
+        self.path = path
+        self._db = connection
+        self.writable = writable
+        self.meta = self._read_meta()
+
+    # ------------------------------------------------------------------ opening
+    @classmethod
+    def create(cls, path: str | Path, meta: Mapping[str, Any], overwrite: bool = False) -> ScanLog:
+        """Start a new log with the given meta entries (wall_fingerprint is required)."""
+        path = Path(path)
+        if path.exists():
+            if not overwrite:
+                raise InputError(f"{path}: a scan log already exists here",
+                                 "continue it with `arproj scan --resume LOG` or choose another --log path")
+            for suffix in ("", "-wal", "-shm"):
+                Path(str(path) + suffix).unlink(missing_ok=True)
+        if "wall_fingerprint" not in meta:
+            raise ValueError("meta needs wall_fingerprint")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        db = _connect(path)
+        db.executescript(_SCHEMA)
+        entries = {"format": FORMAT, "created": datetime.now(UTC).isoformat(timespec="seconds"),
+                   "status": "running", **meta}
+        with db:
+            db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)",
+                           [(k, json.dumps(v)) for k, v in entries.items()])
+        return cls(path, db, writable=True)
+
+    @classmethod
+    def open(cls, path: str | Path, writable: bool = False) -> ScanLog:
+        """Open an existing log (read-only unless writable). Raises InputError if it is not a scan log."""
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"{path}: scan log not found", "give the path passed to --log when scanning")
+        try:
+            db = _connect(path, readonly=not writable)
+            names = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        except sqlite3.DatabaseError as err:
+            raise InputError(f"{path}: not a scan log (SQLite says: {err})") from None
+        if not {"meta", "frames", "passes", "samples"} <= names:
+            raise InputError(f"{path}: not a scan log (tables meta/frames/passes/samples missing)")
+        log = cls(path, db, writable)
+        if log.meta.get("format") != FORMAT:
+            raise InputError(f"{path}: meta format = {log.meta.get('format')!r}, expected {FORMAT!r}")
+        return log
+
+    def close(self) -> None:
+        self._db.close()
+
+    def __enter__(self) -> ScanLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _read_meta(self) -> dict[str, Any]:
+        try:
+            return {k: json.loads(v) for k, v in self._db.execute("SELECT key, value FROM meta")}
+        except sqlite3.OperationalError:
+            return {}
+
+    # ------------------------------------------------------------------ checks
+    def check_wall(self, fingerprint: str, wall_source: str = "") -> None:
+        """Raise InputError unless the log was written for the wall with this fingerprint."""
+        if self.meta.get("wall_fingerprint") != fingerprint:
+            raise InputError(
+                f"{self.path}: this log is from another wall (log: {self.meta.get('wall_name')!r} from "
+                f"{self.meta.get('wall_path')!r}, fingerprint {str(self.meta.get('wall_fingerprint'))[:12]}; "
+                f"given: {wall_source or 'wall'} fingerprint {fingerprint[:12]})",
+                "resume with the wall the scan started on, or start a new log")
+
+    # ------------------------------------------------------------------ writing (one transaction per batch)
+    def set_meta(self, key: str, value: Any) -> None:
+        with self._db:
+            self._db.execute("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)", (key, json.dumps(value)))
+        self.meta[key] = value
+
+    def append_frame(self, frame: Mapping[str, Any]) -> None:
+        """Record a frame (keys as FRAME_COLUMNS; `cov` (3, 3) instead of cov_json)."""
+        row = dict(frame)
+        row["cov_json"] = json.dumps(np.asarray(row.pop("cov"), dtype=float).reshape(9).tolist())
+        for key in ("true_x_m", "true_y_m", "true_phi_rad"):
+            row.setdefault(key, None)
+        with self._db:
+            self._db.execute(f"INSERT INTO frames({', '.join(FRAME_COLUMNS)}) VALUES "
+                             f"({', '.join('?' * len(FRAME_COLUMNS))})", [row[c] for c in FRAME_COLUMNS])
+
+    def append_pass(self, pass_row: Mapping[str, Any], samples: Mapping[str, np.ndarray]) -> None:
+        """Record one whole pass and its samples in one transaction.
+
+        samples : dict of (n,) arrays keyed by SAMPLE_COLUMNS except seq (assigned here, consecutive) and
+            pass_id/frame_id (taken from pass_row); missing float columns are stored as NULL.
+        """
+        n = len(samples["time_s"])
+        samples = {**samples, "pass_id": np.full(n, pass_row["pass_id"]),
+                   "frame_id": np.full(n, pass_row["frame_id"])}
+        start = self.next_seq()
+        columns = [c for c in SAMPLE_COLUMNS if c != "seq"]
+        arrays = []
+        for c in columns:
+            values = np.asarray(samples[c]) if c in samples else np.full(n, np.nan)
+            if c in INT_SAMPLE_COLUMNS:
+                arrays.append(values.astype(np.int64).tolist())
+                continue
+            values = values.astype(np.float64)
+            nan = np.isnan(values)
+            if nan.any():  # NULL in SQL
+                arrays.append([None if missing else v for v, missing in zip(values.tolist(), nan, strict=True)])
+            else:
+                arrays.append(values.tolist())
+        rows = zip(range(start, start + n), *arrays, strict=True)
+        row = {**pass_row, "n_samples": n}
+        with self._db:
+            self._db.execute(f"INSERT INTO passes({', '.join(PASS_COLUMNS)}) VALUES "
+                             f"({', '.join('?' * len(PASS_COLUMNS))})", [row[c] for c in PASS_COLUMNS])
+            self._db.executemany(f"INSERT INTO samples({', '.join(SAMPLE_COLUMNS)}) VALUES "
+                                 f"({', '.join('?' * len(SAMPLE_COLUMNS))})", rows)
+
+    def next_seq(self) -> int:
+        value = self._db.execute("SELECT MAX(seq) FROM samples").fetchone()[0]
+        return 0 if value is None else int(value) + 1
+
+    # ------------------------------------------------------------------ reading
+    def samples(self, pass_ids: list[int] | None = None) -> dict[str, np.ndarray]:
+        """All samples (or those of some passes) ordered by seq, as a dict of (n,) arrays."""
+        query = f"SELECT {', '.join(SAMPLE_COLUMNS)} FROM samples"
+        params: list[int] = []
+        if pass_ids is not None:
+            query += f" WHERE pass_id IN ({', '.join('?' * len(pass_ids))})"
+            params = [int(p) for p in pass_ids]
+        rows = self._db.execute(query + " ORDER BY seq", params).fetchall()
+        table = np.array(rows, dtype=np.float64).reshape(len(rows), len(SAMPLE_COLUMNS)) if rows else \
+            np.zeros((0, len(SAMPLE_COLUMNS)))
+        return {c: (table[:, i].astype(np.int64) if c in INT_SAMPLE_COLUMNS else table[:, i])
+                for i, c in enumerate(SAMPLE_COLUMNS)}
+
+    def frames(self) -> dict[str, np.ndarray]:
+        """Frames ordered by id: arrays per FRAME_COLUMNS (cov_json replaced by cov (n, 3, 3))."""
+        rows = self._db.execute(f"SELECT {', '.join(FRAME_COLUMNS)} FROM frames ORDER BY frame_id").fetchall()
+        out: dict[str, np.ndarray] = {}
+        for i, c in enumerate(FRAME_COLUMNS):
+            if c == "cov_json":
+                out["cov"] = np.array([json.loads(r[i]) for r in rows], dtype=np.float64).reshape(-1, 3, 3)
+            elif c == "frame_id":
+                out[c] = np.array([r[i] for r in rows], dtype=np.int64)
+            else:
+                out[c] = np.array([np.nan if r[i] is None else r[i] for r in rows], dtype=np.float64)
+        return out
+
+    def passes(self) -> dict[str, np.ndarray]:
+        rows = self._db.execute(f"SELECT {', '.join(PASS_COLUMNS)} FROM passes ORDER BY pass_id").fetchall()
+        out: dict[str, np.ndarray] = {}
+        for i, c in enumerate(PASS_COLUMNS):
+            values = [r[i] for r in rows]
+            if c in ("stage", "axis"):
+                out[c] = np.array(values, dtype=str)
+            elif c in ("pass_id", "frame_id", "direction", "n_samples"):
+                out[c] = np.array(values, dtype=np.int64)
+            else:
+                out[c] = np.array(values, dtype=np.float64)
+        return out
+
+    def pass_count(self) -> int:
+        return int(self._db.execute("SELECT COUNT(*) FROM passes").fetchone()[0])
+
+    def frame_ids(self) -> set[int]:
+        return {int(r[0]) for r in self._db.execute("SELECT frame_id FROM frames")}
+
+
+def _connect(path: Path, readonly: bool = False) -> sqlite3.Connection:
+    if readonly:
+        db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=10.0)
+    else:
+        db = sqlite3.connect(str(path), timeout=10.0)
+        db.execute("PRAGMA journal_mode=WAL")
+        db.execute("PRAGMA synchronous=FULL")  # a committed batch survives power loss, not just a crash
+    return db

@@ -1,0 +1,76 @@
+"""A simple 1-D peak detector for one pass of the wall scanner (used by the adaptive planner).
+
+The full map / object extraction lives in mapping/; this is only what planning needs: where along a pass a
+reading rises clearly above the device's baseline, how high and how wide. The position is the midpoint of the
+two half-maximum crossings (robust to the flat, saturated tops the device shows), the width the FWHM.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import find_peaks
+
+
+@dataclass
+class PeakConfig:
+    min_height: float = 0.10  # display units above the pass's baseline
+    min_prominence: float = 0.06
+    min_distance_m: float = 0.015
+    merge_distance_m: float = 0.015  # peaks of different channels closer than this are one object
+    grid_step_m: float = 0.0005  # resampling step along the pass (samples are uniform in time, not space)
+
+
+@dataclass
+class Peak:
+    position: float  # metres along the pass coordinate
+    height: float  # above baseline, display units
+    width: float  # full width at half maximum, metres
+
+
+def detect_peaks(coord: np.ndarray, values: np.ndarray, config: PeakConfig | None = None,
+                 grid_step_m: float | None = None) -> list[Peak]:
+    """Peaks of `values` along `coord`. coord, values : (n,) (metres, display units); any order."""
+    cfg = config or PeakConfig()
+    coord = np.asarray(coord, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    if coord.size < 5 or np.ptp(coord) < 4 * cfg.grid_step_m:
+        return []
+    order = np.argsort(coord, kind="stable")
+    c, v = coord[order], values[order]
+    c, first = np.unique(c, return_index=True)
+    v = v[first]
+    step = grid_step_m or max(cfg.grid_step_m, float(np.median(np.diff(c))) if len(c) > 1 else cfg.grid_step_m)
+    grid = np.arange(c[0], c[-1] + step / 2, step)
+    y = np.interp(grid, c, v)
+    smooth = max(1, round(0.002 / step))  # 2 mm moving average against sample noise
+    if smooth > 1:
+        kernel = np.ones(smooth) / smooth
+        y = np.convolve(np.pad(y, (smooth // 2, smooth - 1 - smooth // 2), mode="edge"), kernel, mode="valid")
+    baseline = float(np.percentile(y, 20))
+    above = y - baseline
+    idx, _ = find_peaks(np.pad(above, 1, constant_values=0.0), height=cfg.min_height,
+                        prominence=cfg.min_prominence, distance=max(1, round(cfg.min_distance_m / step)))
+    idx = idx - 1
+    peaks = []
+    for i in idx:
+        half = 0.5 * above[i]
+        left = i
+        while left > 0 and above[left] > half:
+            left -= 1
+        right = i
+        while right < len(above) - 1 and above[right] > half:
+            right += 1
+        if above[left] > half or above[right] > half:
+            continue  # cut off by the end of the pass: its centre is unknown
+        x_left = _crossing(grid, above, left, left + 1, half)
+        x_right = _crossing(grid, above, right - 1, right, half)
+        peaks.append(Peak(position=0.5 * (x_left + x_right), height=float(above[i]), width=x_right - x_left))
+    return peaks
+
+
+def _crossing(x: np.ndarray, y: np.ndarray, i: int, j: int, level: float) -> float:
+    if y[j] == y[i]:
+        return float(x[i])
+    return float(x[i] + (level - y[i]) * (x[j] - x[i]) / (y[j] - y[i]))

@@ -1,0 +1,1 @@
+"""Simulators of the scanning site and of the serial devices (GRBL drives, wall scanner)."""

@@ -1,0 +1,182 @@
+"""The wall scanner's line protocol (ours, documented here; the simulator in scanner/sim/devices.py speaks it).
+
+Every line in both directions ends with `*CCCCCCCC`: the CRC-32 (zlib/IEEE) of all bytes before the `*`, eight
+upper-case hex digits (an NMEA-style XOR byte lets ~1/256 damaged lines through, and insertions of equal byte
+pairs always: too weak for "never a silently wrong sample").
+Requests start with `#<id> ` (id 1..65535, chosen by the host) and every response line repeats it, so a late
+answer to an earlier request can never be taken for the current one.
+
+    host -> device                       device -> host
+    #7 ID?*CRC                            #7 OK WALLSCAN <model> <firmware>*CRC
+    #8 CLK?*CRC                           #8 OK <t_us>*CRC              device clock, microseconds
+    #9 ARM <rate_hz> <tag>*CRC            #9 OK <t_us>*CRC              sampling starts at t_us: sample k is
+                                                                     taken at t_us + k * round(1e6 / rate_hz)
+    #10 DISARM*CRC                        #10 OK <n>*CRC                n samples are buffered
+    #11 GET <first> <count>*CRC           #11 S <k> <t_us> <ind> <cap> <ac>*CRC   (one line per sample)
+                                         #11 END <count>*CRC
+    errors                               #<id> ERR <code> <text>*CRC   1 unknown command, 2 bad checksum,
+                                                                     3 not armed / no buffer, 4 bad argument
+Readings are device counts 0..1000 (display units × 1000); <tag> is echoed nowhere but lets a simulator
+reproduce a pass. After a power cycle or reconnect the buffer is gone (`ERR 3`): the host redoes the pass.
+
+Robustness: a line with a bad checksum, a wrong id or a wrong shape is skipped; a request without a valid
+answer before the deadline is repeated (every request is idempotent; GET is a pure read); missing or
+duplicated samples in a GET are fetched again; a reading outside 0..1000 in a line with a valid checksum is
+the device's own statement and is reported, not retried away.
+"""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+
+from geometry.errors import InputError
+from scanner.grbl import DeviceResetError
+from scanner.serial_link import DisconnectedError, LinkError, LinkTimeoutError, SerialLink
+
+GET_CHUNK = 200
+COUNTS_MAX = 1000
+
+
+def checksum(body: str) -> str:
+    return f"{zlib.crc32(body.encode('ascii', errors='replace')):08X}"
+
+
+def frame_line(body: str) -> str:
+    return f"{body}*{checksum(body)}"
+
+
+def unframe_line(line: str) -> str | None:
+    """The body of a line whose checksum is right, else None."""
+    star = line.rfind("*")
+    if star < 0 or len(line) - star != 9:
+        return None
+    body = line[:star]
+    return body if line[star + 1:].upper() == checksum(body) else None
+
+
+class ScannerError(InputError):
+    """The wall scanner refused a request or reported impossible values."""
+
+
+class WallScanner:
+    """Client of the wall scanner over a SerialLink."""
+
+    def __init__(self, link: SerialLink, retries: int = 8) -> None:
+        self.link = link
+        self.retries = retries
+        self._next_id = 1
+        self._seen_reconnects = link.reconnects
+        self.faults_recovered = 0
+
+    def _new_id(self) -> int:
+        value = self._next_id
+        self._next_id = self._next_id % 65535 + 1
+        return value
+
+    def _check_reset(self) -> None:
+        if self.link.reconnects != self._seen_reconnects:
+            self._seen_reconnects = self.link.reconnects
+            raise DeviceResetError("scanner reconnected")
+
+    def request(self, command: str, multi: bool = False) -> list[list[str]]:
+        """Send `command`; return the answer's fields (one list per line; for multi, all lines up to END)."""
+        with self.link.lock:
+            self._check_reset()
+            for _ in range(self.retries + 1):
+                request_id = self._new_id()
+                tag = f"#{request_id}"
+                try:
+                    self.link.drain()
+                    self.link.write_line(frame_line(f"{tag} {command}"))
+                    lines: list[list[str]] = []
+                    while True:
+                        body = unframe_line(self.link.read_line())
+                        if body is None:
+                            self.faults_recovered += 1
+                            continue
+                        fields = body.split()
+                        if not fields or fields[0] != tag or len(fields) < 2:
+                            self.faults_recovered += 1  # stale answer or noise
+                            continue
+                        if fields[1] == "ERR":
+                            code = int(fields[2]) if len(fields) > 2 and fields[2].isdigit() else -1
+                            if code == 2:  # our request arrived damaged: send it again
+                                self.faults_recovered += 1
+                                break
+                            if code == 3:
+                                raise DeviceResetError("scanner lost its buffer")
+                            raise ScannerError(f"scanner ({self.link.url}): {command!r} -> {' '.join(fields[1:])}")
+                        if not multi:
+                            return [fields[1:]]
+                        if fields[1] == "END":
+                            lines.append(fields[1:])
+                            return lines
+                        lines.append(fields[1:])
+                except LinkTimeoutError:
+                    self.faults_recovered += 1
+                    continue
+                except DisconnectedError:
+                    self.faults_recovered += 1
+                    self.link.reconnect()
+                    self._seen_reconnects = self.link.reconnects
+                    raise DeviceResetError("scanner reconnected") from None
+            raise LinkError(f"scanner at {self.link.url}: no valid answer to {command!r} after {self.retries + 1} "
+                            "tries", "check the connection and resume")
+
+    def _ok_value(self, command: str) -> str:
+        fields = self.request(command)[0]
+        if fields[0] != "OK" or len(fields) < 2:
+            raise ScannerError(f"scanner ({self.link.url}): unexpected answer {' '.join(fields)!r} to {command!r}")
+        return fields[1]
+
+    def identify(self) -> str:
+        return " ".join(self.request("ID?")[0][1:])
+
+    def clock_us(self) -> int:
+        return int(self._ok_value("CLK?"))
+
+    def arm(self, rate_hz: float, tag: int) -> int:
+        """Start sampling; returns the device time (µs) of sample 0."""
+        return int(self._ok_value(f"ARM {rate_hz:g} {int(tag)}"))
+
+    def disarm(self) -> int:
+        """Stop sampling; returns the number of samples buffered."""
+        return int(self._ok_value("DISARM"))
+
+    def fetch(self, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """Samples 0..count-1 of the buffer: (t_us (n,) int64, counts (n, 3) int64). Missing ones re-fetched."""
+        t_us = np.full(count, -1, dtype=np.int64)
+        readings = np.zeros((count, 3), dtype=np.int64)
+        have = np.zeros(count, dtype=bool)
+        failures = 0
+        while failures <= self.retries:
+            missing = np.flatnonzero(~have)
+            if missing.size == 0:
+                return t_us, readings
+            before = int(have.sum())
+            first = int(missing[0])
+            chunk = min(GET_CHUNK, count - first)
+            for fields in self.request(f"GET {first} {chunk}", multi=True):
+                if fields[0] != "S" or len(fields) != 6:
+                    continue
+                try:
+                    k, t, a, b, c = (int(v) for v in fields[1:])
+                except ValueError:
+                    self.faults_recovered += 1
+                    continue
+                if not first <= k < first + chunk:
+                    continue
+                for name, value in (("inductive", a), ("capacitive", b), ("ac", c)):
+                    if not 0 <= value <= COUNTS_MAX:
+                        raise ScannerError(f"scanner ({self.link.url}) reported {name} = {value} counts in sample "
+                                           f"{k}, outside 0..{COUNTS_MAX}",
+                                           "the sensor may be faulty or saturated by metal at the device; "
+                                           "check it and resume")
+                t_us[k], readings[k] = t, (a, b, c)
+                have[k] = True
+            if int(have.sum()) == before:
+                failures += 1
+        raise LinkError(f"scanner at {self.link.url}: samples {np.flatnonzero(~have)[:5].tolist()}… could not be "
+                        "read", "check the connection and resume")

@@ -1,0 +1,71 @@
+"""The SQLite scan log: round trip, batches, refusal of a log from another wall."""
+
+import sqlite3
+
+import numpy as np
+import pytest
+
+from geometry.errors import InputError
+from scanner.log import SAMPLE_COLUMNS, ScanLog
+
+
+def _samples(n, offset=0.0):
+    rng = np.random.default_rng(n)
+    cols = {c: rng.random(n) + offset for c in SAMPLE_COLUMNS if c not in ("seq", "axis", "direction",
+                                                                           "frame_id", "pass_id")}
+    cols.update(frame_id=np.zeros(n, int), pass_id=np.zeros(n, int), axis=np.zeros(n, int),
+                direction=np.ones(n, int))
+    cols["true_x_m"] = np.full(n, np.nan)
+    return cols
+
+
+def _pass(pass_id):
+    return {"pass_id": pass_id, "frame_id": 0, "stage": "raster", "axis": "x", "direction": 1,
+            "start_u_m": 0.0, "start_v_m": 0.1, "end_u_m": 0.3, "end_v_m": 0.1, "t_start_s": 1.0, "t_end_s": 7.0}
+
+
+def test_round_trip_of_frames_passes_and_samples(tmp_path):
+    log = ScanLog.create(tmp_path / "scan.db", {"wall_fingerprint": "abc", "wall_name": "w", "plan": {"kind": "dense"}})
+    cov = np.diag([1e-5, 2e-5, 1e-6])
+    log.append_frame({"frame_id": 0, "time_s": 0.0, "cmd_x_m": 0.0, "cmd_y_m": 0.0, "cmd_phi_rad": 0.0,
+                      "est_x_m": 0.001, "est_y_m": -0.002, "est_phi_rad": 0.0005, "cov": cov})
+    first, second = _samples(50), _samples(30, offset=1.0)
+    log.append_pass(_pass(0), first)
+    log.append_pass({**_pass(1), "direction": -1}, second)
+    log.close()
+    with ScanLog.open(tmp_path / "scan.db") as back:
+        assert back.meta["plan"] == {"kind": "dense"} and back.meta["status"] == "running"
+        s = back.samples()
+        np.testing.assert_array_equal(s["seq"], np.arange(80))
+        np.testing.assert_allclose(s["inductive"], np.concatenate([first["inductive"], second["inductive"]]))
+        assert np.isnan(s["true_x_m"]).all()
+        assert s["seq"].dtype == np.int64
+        f = back.frames()
+        np.testing.assert_allclose(f["cov"][0], cov)
+        assert np.isnan(f["true_x_m"][0])
+        p = back.passes()
+        assert p["n_samples"].tolist() == [50, 30] and p["direction"].tolist() == [1, -1]
+        assert p["stage"].tolist() == ["raster", "raster"]
+        assert len(back.samples(pass_ids=[1])["seq"]) == 30
+
+
+def test_a_failed_batch_leaves_no_partial_pass(tmp_path):
+    log = ScanLog.create(tmp_path / "scan.db", {"wall_fingerprint": "abc"})
+    log.append_pass(_pass(0), _samples(10))
+    with pytest.raises(sqlite3.IntegrityError):
+        log.append_pass(_pass(0), _samples(10))  # duplicate pass id: the whole batch is rolled back
+    assert log.pass_count() == 1 and log.next_seq() == 10
+
+
+def test_log_from_another_wall_and_not_a_log(tmp_path):
+    log = ScanLog.create(tmp_path / "scan.db", {"wall_fingerprint": "abc", "wall_name": "kitchen",
+                                                "wall_path": "kitchen.yaml"})
+    log.check_wall("abc")
+    with pytest.raises(InputError, match=r"another wall.*kitchen"):
+        log.check_wall("def", "bath.yaml")
+    with pytest.raises(InputError, match="already exists"):
+        ScanLog.create(tmp_path / "scan.db", {"wall_fingerprint": "abc"})
+    junk = tmp_path / "junk.db"
+    junk.write_bytes(b"this is not sqlite at all" * 100)
+    with pytest.raises(InputError, match="not a scan log"):
+        ScanLog.open(junk)

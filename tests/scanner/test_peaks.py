@@ -1,0 +1,42 @@
+"""The 1-D peak detector and the segment extractor's evaluation."""
+
+import numpy as np
+import pytest
+
+from scanner.extract import evaluate
+from scanner.peaks import detect_peaks
+from scanner.wall import random_wall
+
+
+def _signal(x, centres, sigma, height, seed=0):
+    y = 0.03 + sum(height * np.exp(-0.5 * ((x - c) / sigma) ** 2) for c in centres)
+    return y + 0.006 * np.random.default_rng(seed).standard_normal(x.size)
+
+
+def test_position_and_width_of_a_noisy_peak():
+    x = np.arange(0.0, 0.4, 0.00025)
+    peaks = detect_peaks(x, _signal(x, [0.1734], 0.01, 0.6))
+    assert len(peaks) == 1
+    assert peaks[0].position == pytest.approx(0.1734, abs=0.0005)
+    assert peaks[0].width == pytest.approx(2.3548 * 0.01, rel=0.05)
+    assert peaks[0].height == pytest.approx(0.6, abs=0.03)
+
+
+def test_two_peaks_any_order_and_a_cut_off_peak_is_not_reported():
+    x = np.arange(0.0, 0.4, 0.00025)
+    y = _signal(x, [0.1, 0.2, 0.395], 0.008, 0.5)
+    found = detect_peaks(x[::-1], y[::-1])  # a pass in the other direction
+    assert [round(p.position, 3) for p in found] == [0.1, 0.2]
+    assert detect_peaks(x, _signal(x, [], 0.01, 0.0)) == []  # noise alone
+
+
+def test_evaluation_against_the_truth():
+    wall = random_wall(2)
+    exact = [t.points_m[i:i + 2] for t in wall.targets() for i in range(len(t.points_m) - 1)]
+    ev = evaluate(wall, exact)
+    assert ev.recall == 1.0 and ev.mean_error_m == pytest.approx(0.0, abs=1e-9) and ev.false_length_m < 1e-9
+    up, right = np.array([0.0, 0.01]), np.array([0.01, 0.0])
+    shifted = [s + up if abs(s[1, 1] - s[0, 1]) < 1e-9 else s + right for s in exact]
+    assert evaluate(wall, shifted).mean_error_m == pytest.approx(0.01, abs=0.002)
+    far = [s + np.array([0.05, 0.05]) for s in exact]
+    assert evaluate(wall, far).recall < 0.5

@@ -1,0 +1,138 @@
+"""Scans recorded in the log: kill at random points, resume, and get exactly the uninterrupted samples."""
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from geometry.errors import InputError
+from scanner.log import ScanLog
+from scanner.plan import DriveConfig
+from scanner.run import DirectBackend, ScanCrashError, open_for_resume, run_scan, scan_meta, simulated_site
+from scanner.sensor_model import SensorConfig
+from scanner.wall import load_wall, shipped_walls
+
+SMALL = shipped_walls()["small_test_wall"]
+
+
+def _uninterrupted(wall, plan, seed):
+    sensor, drives = SensorConfig(), DriveConfig()
+    world, robot = simulated_site(wall, sensor, drives, seed)
+    return run_scan(wall, DirectBackend(world), robot, plan_kind=plan, sensor=sensor, drives=drives)
+
+
+def _new_log(path, wall, plan, seed):
+    from scanner.plan import make_planner
+
+    sensor, drives = SensorConfig(), DriveConfig()
+    described = make_planner(plan, wall, drives).describe()
+    return ScanLog.create(path, scan_meta(wall, str(SMALL), described, sensor, drives, seed, simulated=True))
+
+
+def _resume_until(path, wall, plan, seed, crash_at):
+    sensor, drives = SensorConfig(), DriveConfig()
+    log, _ = open_for_resume(path)
+    world, robot = simulated_site(wall, sensor, drives, seed)
+
+    def hook(pass_id):
+        if pass_id == crash_at:
+            raise ScanCrashError(f"power lost before pass {pass_id} was committed")
+
+    try:
+        return run_scan(wall, DirectBackend(world), robot, plan_kind=plan, plan_options=log.meta["plan"],
+                        sensor=sensor, drives=drives, log=log, crash_hook=hook)
+    finally:
+        log.close()
+
+
+@pytest.mark.parametrize(("plan", "crashes"), [("dense", 20), ("adaptive", 6)])
+def test_crashes_at_random_points_then_resume_give_the_uninterrupted_samples(tmp_path, plan, crashes):
+    wall = load_wall(SMALL)
+    reference = _uninterrupted(wall, plan, seed=4)
+    rng = np.random.default_rng(7)
+    points = np.sort(rng.choice(np.arange(reference.n_passes), size=min(crashes, reference.n_passes),
+                                replace=False))
+    path = tmp_path / "scan.db"
+    _new_log(path, wall, plan, seed=4).close()
+    for crash_at in points:
+        with pytest.raises(ScanCrashError):
+            _resume_until(path, wall, plan, 4, int(crash_at))
+        with ScanLog.open(path) as log:
+            assert log.pass_count() == crash_at  # everything before the crash is kept, nothing after
+    _resume_until(path, wall, plan, 4, crash_at=-1)
+    with ScanLog.open(path) as log:
+        stored = log.samples()
+        assert log.meta["status"] == "complete"
+    assert len(stored["seq"]) == len(reference.samples["seq"])
+    np.testing.assert_array_equal(stored["seq"], np.arange(len(stored["seq"])))  # unique, no duplicates
+    for key, values in reference.samples.items():
+        np.testing.assert_array_equal(stored[key], values, err_msg=key)
+
+
+def _pass_count(path):
+    try:
+        with sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=1.0) as db:
+            return db.execute("SELECT COUNT(*) FROM passes").fetchone()[0]
+    except sqlite3.Error:
+        return 0
+
+
+def _cli(*args):
+    return [sys.executable, "-c", "from arproj.cli import main; main()", *args]
+
+
+def test_kill_9_of_the_cli_and_resume(tmp_path):
+    wall = load_wall(SMALL)
+    reference = _uninterrupted(wall, "dense", seed=3)
+    path = tmp_path / "scan.db"
+    env = {**os.environ, "COLUMNS": "120"}
+    for kill_after in (4, 17):  # two SIGKILLs at different points of the serial-device scan
+        args = ["scan", "--resume", str(path)] if path.exists() else \
+            ["scan", "--sim", "--wall", str(SMALL), "--log", str(path), "--plan", "dense", "--seed", "3"]
+        proc = subprocess.Popen(_cli(*args), env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 60
+        while _pass_count(path) < kill_after and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.005)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        assert _pass_count(path) < reference.n_passes, "the scan finished before it could be killed"
+    done = subprocess.run(_cli("scan", "--resume", str(path)), env=env, capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    with ScanLog.open(path) as log:
+        stored = log.samples()
+    for key, values in reference.samples.items():
+        np.testing.assert_array_equal(stored[key], values, err_msg=key)
+
+
+def test_resume_with_another_wall_or_plan_is_refused(tmp_path):
+    wall = load_wall(SMALL)
+    path = tmp_path / "scan.db"
+    _new_log(path, wall, "dense", seed=1).close()
+    with pytest.raises(InputError, match="another wall"):
+        open_for_resume(path, shipped_walls()["paper_test_plate"])
+    log, _ = open_for_resume(path, SMALL)
+    sensor, drives = SensorConfig(), DriveConfig()
+    world, robot = simulated_site(wall, sensor, drives, 1)
+    run_scan(wall, DirectBackend(world), robot, plan_kind="dense", sensor=sensor, drives=drives, log=log)
+    log.close()
+    log, _ = open_for_resume(path)
+    world, robot = simulated_site(wall, sensor, drives, 1)
+    with pytest.raises(InputError, match="different plan"):
+        run_scan(wall, DirectBackend(world), robot, plan_kind="adaptive", sensor=sensor, drives=drives, log=log)
+
+
+def test_cli_errors_are_one_line(tmp_path):
+    bad = tmp_path / "wall.yaml"
+    bad.write_text("format: arproj-wall/1\nwidth_m: 2\nheight_m: 3.5\nmaterial: brick\n")
+    done = subprocess.run(_cli("scan", "--sim", "--wall", str(bad), "--log", str(tmp_path / "x.db")),
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert "height_m = 3.5 exceeds the drives' reach" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert not (tmp_path / "x.db").exists()
