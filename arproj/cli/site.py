@@ -1,0 +1,28 @@
+"""`arproj site`: build a simulated site and write pictures of what its cameras see."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from arproj.console import console, err_console
+
+
+def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+    @app.command("site")
+    def site_command(
+        out: Path = typer.Option(Path("site-pictures"), "--out", help="Folder for the pictures."),
+        scene: Path | None = typer.Option(None, "--scene", help="Scene YAML (default: the built-in typical "
+                                          "room; see arproj/sim/scenes/default.yaml for every key)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of everything random in the simulation."),
+    ) -> None:
+        """Build the simulated site and write what each camera sees with a projected test pattern, the
+        ground truth drawn over it, and a plan view."""
+        from arproj.sim import Site
+        from arproj.sim.pictures import write_site_pictures
+
+        with err_console.status("building the site and rendering …"), Site.build(scene, seed=seed) as site:
+            paths = write_site_pictures(site, out)
+        for path in paths:
+            console.print(f"wrote {path}", highlight=False)
