@@ -1,0 +1,168 @@
+"""`arproj calibrate`: the calibration wizard, and its steps as non-interactive commands.
+
+    arproj calibrate [--sim] [--out DIR] [--restart] [--stop-after STEP]   the wizard, resumable
+    arproj calibrate stereo --left 'DIR/left*.jpg' --right 'DIR/right*.jpg' --board chessboard:9x6:0.025 --out RIG
+    arproj calibrate projector --captures 'DIR/capture_*' --projector 1920x1080 --board chessboard:9x7:0.075 --out DIR
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+from arproj.console import console, err_console, track
+from geometry.errors import InputError
+
+
+def _parse_size(text: str, option: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise InputError(f"{option} {text!r} is not WIDTHxHEIGHT", "e.g. 1920x1080") from None
+    if w <= 0 or h <= 0:
+        raise InputError(f"{option} {text!r}: width and height must be positive")
+    return w, h
+
+
+def stereo_command(left: str, right: str, board_spec: str, out: Path, model: str, as_json: bool) -> dict:
+    """Run stereo calibration on image files and write the rig folder; returns the quality figures."""
+    from calibration.boards import parse_board
+    from calibration.image_sets import detect_stereo_set
+    from calibration.plots import plot_stereo_coverage
+    from calibration.stereo import calibrate_stereo, coverage_advice
+    from geometry.rig import Rig
+
+    board = parse_board(board_spec)
+    images = detect_stereo_set(left, right, board, track=lambda it, d, n: track(it, d, total=n))
+    for name in images.no_board:
+        err_console.print(f"[yellow]warning:[/] no {board.cols}x{board.rows} board found in {name} "
+                          "(skipped; check the board is fully in view, sharp and the size is right)",
+                          highlight=False)
+    try:
+        calib = calibrate_stereo(images.left, images.right, board, model=model)
+    except InputError as err:
+        if images.no_board:
+            raise InputError(f"{err.message} (no board in: {', '.join(images.no_board)})", err.hint) from None
+        raise
+    rig = Rig(intrinsics={"camera_left": calib.left, "camera_right": calib.right},
+              poses={"T_camera_right_from_camera_left": calib.T_right_from_left},
+              quality={"stereo": calib.quality() | {"board": board_spec, "images_without_board": images.no_board}})
+    out.mkdir(parents=True, exist_ok=True)
+    rig.save(out)
+    plot_stereo_coverage(calib, [lv for lv in images.left if lv is not None],
+                         [rv for rv in images.right if rv is not None], out / "stereo_coverage.png")
+    figures = calib.quality()
+    summary = {
+        "out": str(out),
+        "reprojection_rms_px": figures["reprojection_rms_px"],
+        "epipolar_error_px_per_image": figures["epipolar_error_px_per_image"],
+        "baseline_m": figures["baseline_m"],
+        "pairs_used": figures["pairs_used"],
+        "pairs_rejected": figures["pairs_rejected"],
+        "images_without_board": images.no_board,
+        "advice": coverage_advice(calib.coverage),
+        "camera_left": {"fx": calib.left.fx, "fy": calib.left.fy, "cx": calib.left.cx, "cy": calib.left.cy},
+        "camera_right": {"fx": calib.right.fx, "fy": calib.right.fy, "cx": calib.right.cx,
+                         "cy": calib.right.cy},
+    }
+    if as_json:
+        print(json.dumps(summary, indent=2))
+    else:
+        console.print(f"stereo calibration of {figures['pairs_used']} pairs → {out}", highlight=False)
+        console.print(f"  reprojection RMS {summary['reprojection_rms_px']:.3f} px, epipolar error "
+                      f"{summary['epipolar_error_px_per_image']:.3f} px per image, baseline "
+                      f"{1000 * summary['baseline_m']:.2f} mm", highlight=False)
+        for name in summary["pairs_rejected"]:
+            console.print(f"  rejected as outlier: {name}", highlight=False)
+        for line in summary["advice"]:
+            console.print(f"  next: {line}", highlight=False)
+    return summary
+
+
+def projector_command(captures: str, projector: str, board_spec: str, camera: Path | None, out: Path,
+                      as_json: bool) -> dict:
+    """Moreno & Taubin projector calibration from Gray-code capture folders; writes projector.yaml."""
+    from calibration.boards import parse_board
+    from calibration.projector import calibrate_projector_from_folders
+    from geometry.intrinsics import read_camera_info, write_camera_info
+
+    board = parse_board(board_spec)
+    size = _parse_size(projector, "--projector")
+    cam = read_camera_info(camera) if camera is not None else None
+    result = calibrate_projector_from_folders(captures, size, board, cam,
+                                              track=lambda it, d, n: track(it, d, total=n))
+    out.mkdir(parents=True, exist_ok=True)
+    write_camera_info(out / "projector.yaml", result.projector, camera_name="projector")
+    write_camera_info(out / "camera.yaml", result.camera, camera_name="camera")
+    figures = result.quality()
+    (out / "projector_quality.json").write_text(json.dumps(figures, indent=2))
+    if as_json:
+        print(json.dumps(figures, indent=2))
+    else:
+        console.print(f"projector calibration from {figures['poses_used']} board poses → {out}", highlight=False)
+        console.print(f"  projector RMS {figures['projector_rms_px']:.3f} px, camera RMS "
+                      f"{figures['camera_rms_px']:.3f} px, fx {result.projector.fx:.1f} fy "
+                      f"{result.projector.fy:.1f} cx {result.projector.cx:.1f} cy {result.projector.cy:.1f}",
+                      highlight=False)
+        for line in figures["warnings"]:
+            console.print(f"  [yellow]warning:[/] {line}", highlight=False)
+    return figures
+
+
+def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+    del bench_app
+    calibrate_app = typer.Typer(help="Calibrate cameras, projector and pan/tilt head. Without a subcommand: "
+                                "the step-by-step wizard.", no_args_is_help=False)
+
+    @calibrate_app.callback(invoke_without_command=True)
+    def wizard(
+        ctx: typer.Context,
+        out: Path = typer.Option(Path("calibration"), "--out", help="Folder for every result and the wizard's "
+                                 "state (re-running resumes where it stopped)."),
+        sim: bool = typer.Option(False, "--sim", help="Run every step on the simulated site (no hardware)."),
+        restart: bool = typer.Option(False, "--restart", help="Forget finished steps and start over."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the simulated site."),
+        stop_after: str = typer.Option("", "--stop-after", help="Stop after this step (stereo, projector, "
+                                       "head, validation); run again to resume."),
+        as_json: bool = typer.Option(False, "--json", help="Print the results as JSON."),
+    ) -> None:
+        """The calibration wizard: stereo → projector → head → validation, resumable."""
+        if ctx.invoked_subcommand is not None:
+            return
+        from arproj.wizard import run_wizard
+
+        state = run_wizard(out, sim=sim, restart=restart, seed=seed, stop_after=stop_after or None)
+        if as_json:
+            print(json.dumps(state, indent=2))
+
+    @calibrate_app.command("stereo")
+    def stereo(
+        left: str = typer.Option(..., "--left", help="Glob of the left images, e.g. 'DIR/left*.jpg' (quoted)."),
+        right: str = typer.Option(..., "--right", help="Glob of the right images; paired by sorted name."),
+        board: str = typer.Option("chessboard:9x6:0.025", "--board", help="Board spec: chessboard:COLSxROWS:"
+                                  "SQUARE_M (inner corners) or charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT]."),
+        out: Path = typer.Option(..., "--out", help="Rig folder: camera_left.yaml, camera_right.yaml, rig.yaml."),
+        model: str = typer.Option("k1k2p1p2k3", "--model", help="Distortion model: k1k2, k1k2k3, k1k2p1p2, "
+                                  "k1k2p1p2k3."),
+        as_json: bool = typer.Option(False, "--json", help="Print the quality figures as JSON."),
+    ) -> None:
+        """Stereo calibration from image files; writes ROS camera_info files and the rig file."""
+        stereo_command(left, right, board, out, model, as_json)
+
+    @calibrate_app.command("projector")
+    def projector(
+        captures: str = typer.Option(..., "--captures", help="Glob of the capture folders, one per board pose: "
+                                     "Gray code images in GrayCodePattern.generate() order, then white, black."),
+        size: str = typer.Option(..., "--projector", help="Projector resolution WIDTHxHEIGHT."),
+        board: str = typer.Option("chessboard:9x7:0.075", "--board", help="Printed board spec."),
+        camera: Path | None = typer.Option(None, "--camera", help="camera_info YAML of the camera (else the "
+                                           "camera is calibrated from the same captures)."),
+        out: Path = typer.Option(..., "--out", help="Folder for projector.yaml, camera.yaml and the figures."),
+        as_json: bool = typer.Option(False, "--json", help="Print the quality figures as JSON."),
+    ) -> None:
+        """Projector calibration with one camera and a printed board (Moreno & Taubin local homographies)."""
+        projector_command(captures, size, board, camera, out, as_json)
+
+    app.add_typer(calibrate_app, name="calibrate")

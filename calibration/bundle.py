@@ -1,0 +1,160 @@
+"""Joint refinement (bundle adjustment) of one or two cameras, their relative pose and the target poses.
+
+Unknowns: each non-fixed camera's fx, fy, cx, cy and its free distortion terms; T_1_from_0 when there are two
+cameras (camera 1 = right camera or projector); one pose T_0_from_view per view (board or wall pose), shared
+by both cameras' observations of that view. Residuals: reprojection errors in pixels.
+The Jacobian is taken by finite differences over column groups (scipy's sparse scheme: one residual call per
+group, not per unknown), then solved densely with the exact trust-region solver.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+from scipy.optimize._numdiff import approx_derivative, group_columns
+
+from calibration.camera_model import DISTORTION_MODELS, dist5_from, project, rodrigues_batch
+from geometry.intrinsics import Intrinsics
+from geometry.poses import pose_from_rvec_tvec, rvec_tvec_from_pose
+
+BA_TOLERANCE = 1e-10
+BA_MAX_EVALUATIONS = 200
+
+
+@dataclass
+class Observation:
+    """Camera `camera` saw view `view`: image_points (n, 2) px of object_points (n, 3) m in the view frame."""
+
+    camera: int
+    view: int
+    image_points: NDArray[np.float64]
+    object_points: NDArray[np.float64]
+
+
+@dataclass
+class BundleResult:
+    cameras: list[Intrinsics]
+    T_1_from_0: NDArray[np.float64] | None
+    T_0_from_view: list[NDArray[np.float64]]
+    residuals: list[NDArray[np.float64]]  # per observation, (n, 2) px, in the order given
+
+    @property
+    def rms_px(self) -> float:
+        r = np.concatenate(self.residuals)
+        return float(np.sqrt(np.mean(np.sum(r ** 2, axis=1))))
+
+
+class _Problem:
+    def __init__(self, cameras: list[Intrinsics], models: list[str], fixed: list[bool],
+                 observations: list[Observation], n_views: int) -> None:
+        self.cameras = cameras
+        self.free = [DISTORTION_MODELS[m] for m in models]
+        self.fixed = fixed
+        self.offsets = []
+        offset = 0
+        for i in range(len(cameras)):
+            self.offsets.append(offset)
+            if not fixed[i]:
+                offset += 4 + len(self.free[i])
+        self.stereo_offset = offset
+        self.pose_offset = offset + (6 if len(cameras) == 2 else 0)
+        self.n_params = self.pose_offset + 6 * n_views
+        self.n_views = n_views
+        self.observations = observations
+        # Observations are stacked per camera so each camera projects in one vectorised call.
+        self.groups = []
+        for cam in range(len(cameras)):
+            idx = [k for k, o in enumerate(observations) if o.camera == cam]
+            if not idx:
+                continue
+            obs = [observations[k] for k in idx]
+            view_index = np.concatenate([np.full(len(o.object_points), o.view) for o in obs])
+            obj = np.concatenate([o.object_points for o in obs])
+            img = np.concatenate([o.image_points for o in obs])
+            self.groups.append((cam, idx, view_index, obj, img))
+
+    def camera_params(self, x: NDArray, cam: int) -> tuple[float, float, float, float, NDArray]:
+        if self.fixed[cam]:
+            c = self.cameras[cam]
+            return c.fx, c.fy, c.cx, c.cy, dist5_from(c.dist)
+        o, free = self.offsets[cam], self.free[cam]
+        d = np.zeros(5)
+        d[list(free)] = x[o + 4:o + 4 + len(free)]
+        return x[o], x[o + 1], x[o + 2], x[o + 3], d
+
+    def residual_blocks(self, x: NDArray[np.float64]) -> list[tuple[list[int], NDArray[np.float64]]]:
+        poses = x[self.pose_offset:].reshape(self.n_views, 6)
+        R_views = rodrigues_batch(poses[:, :3])
+        out = []
+        for cam, idx, view_index, obj, img in self.groups:
+            fx, fy, cx, cy, d = self.camera_params(x, cam)
+            p = np.einsum("nij,nj->ni", R_views[view_index], obj) + poses[view_index, 3:]
+            if cam == 1:
+                s = x[self.stereo_offset:self.stereo_offset + 6]
+                p = p @ rodrigues_batch(s[:3])[0].T + s[3:]
+            out.append((idx, project(p, fx, fy, cx, cy, d) - img))
+        return out
+
+    def residuals(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.concatenate([r.ravel() for _, r in self.residual_blocks(x)])
+
+    def sparsity(self) -> NDArray[np.int8]:
+        rows = []
+        for cam, _, view_index, _, _ in self.groups:
+            block = np.zeros((len(view_index), self.n_params), np.int8)
+            if not self.fixed[cam]:
+                o = self.offsets[cam]
+                block[:, o:o + 4 + len(self.free[cam])] = 1
+            if cam == 1:
+                block[:, self.stereo_offset:self.stereo_offset + 6] = 1
+            for k in range(6):
+                block[np.arange(len(view_index)), self.pose_offset + 6 * view_index + k] = 1
+            rows.append(np.repeat(block, 2, axis=0))
+        return np.concatenate(rows)
+
+
+def bundle_adjust(cameras: list[Intrinsics], models: list[str], observations: list[Observation],
+                  T_0_from_view: list[NDArray[np.float64]], T_1_from_0: NDArray[np.float64] | None = None,
+                  fixed: list[bool] | None = None) -> BundleResult:
+    """Refine cameras (unless fixed), T_1_from_0 (two cameras) and view poses from initial values."""
+    fixed = list(fixed) if fixed is not None else [False] * len(cameras)
+    problem = _Problem(cameras, models, fixed, observations, len(T_0_from_view))
+    x0 = []
+    for cam, intr in enumerate(cameras):
+        if not fixed[cam]:
+            d = dist5_from(intr.dist)
+            x0.append(np.concatenate([[intr.fx, intr.fy, intr.cx, intr.cy], d[list(problem.free[cam])]]))
+    if len(cameras) == 2:
+        if T_1_from_0 is None:
+            raise ValueError("two cameras need an initial T_1_from_0")
+        x0.append(np.concatenate(rvec_tvec_from_pose(T_1_from_0)))
+    x0.extend(np.concatenate(rvec_tvec_from_pose(T)) for T in T_0_from_view)
+    x0 = np.concatenate(x0)
+    sparsity = problem.sparsity()
+    groups = group_columns(sparsity)
+
+    def jacobian(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return approx_derivative(problem.residuals, x, method="2-point", sparsity=(sparsity, groups)).toarray()
+
+    fit = least_squares(problem.residuals, x0, jac=jacobian, method="trf", x_scale="jac", ftol=BA_TOLERANCE,
+                        xtol=BA_TOLERANCE, gtol=BA_TOLERANCE, tr_solver="exact", max_nfev=BA_MAX_EVALUATIONS)
+    x = fit.x
+    out_cams = []
+    for cam, intr in enumerate(cameras):
+        fx, fy, cx, cy, d = problem.camera_params(x, cam)
+        dist = tuple(intr.dist) if fixed[cam] else tuple(d)
+        out_cams.append(Intrinsics(float(fx), float(fy), float(cx), float(cy), intr.width, intr.height, dist))
+    T10 = None
+    if len(cameras) == 2:
+        s = x[problem.stereo_offset:problem.stereo_offset + 6]
+        T10 = pose_from_rvec_tvec(s[:3], s[3:])
+    poses = [pose_from_rvec_tvec(p[:3], p[3:]) for p in x[problem.pose_offset:].reshape(-1, 6)]
+    residuals: list[NDArray[np.float64] | None] = [None] * len(observations)
+    for idx, r in problem.residual_blocks(x):
+        bounds = np.cumsum([0, *[len(observations[k].object_points) for k in idx]])
+        for k, a, b in zip(idx, bounds[:-1], bounds[1:], strict=True):
+            residuals[k] = r[a:b]
+    return BundleResult(out_cams, T10, poses, residuals)  # type: ignore[arg-type]

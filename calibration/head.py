@@ -1,0 +1,182 @@
+"""Pan/tilt/roll head calibration: fit geometry.HeadModel to projector poses measured at commanded angles.
+
+Unknowns: each joint's axis direction (2 DOF) and line position (2 DOF), and the projector's pose at zero
+(6 DOF). The joints' zero offsets are not separately observable once axes and the zero pose are free (an
+offset on joint i is the same motion as turning joints i+1.. and the zero pose by that angle), so they are
+absorbed there and written as 0: the fitted model maps *commanded* angles to the projector pose directly,
+including the drive's constant angle bias. The head should approach every calibration angle from the same
+side (the plan does) so backlash is constant too.
+
+Residuals per measured pose: rotation error (radians, scaled by ROTATION_WEIGHT_M metres per radian so one
+degree weighs like 17 mm) and position error (metres).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import least_squares
+
+from geometry.errors import InputError
+from geometry.head import HeadModel
+from geometry.poses import invert, make_pose, rotation_about, rotation_angle_deg
+
+ROTATION_WEIGHT_M = 1.0
+MIN_HEAD_POSES = 7
+MIN_JOINT_SPAN_DEG = 10.0  # each joint must move at least this much across the poses
+FIT_TOLERANCE = 1e-14
+
+
+@dataclass
+class HeadFit:
+    model: HeadModel
+    rotation_rms_deg: float
+    position_rms_m: float
+    per_pose_rotation_deg: list[float]
+    per_pose_position_m: list[float]
+
+    def quality(self) -> dict:
+        return {"rotation_rms_deg": round(self.rotation_rms_deg, 5),
+                "position_rms_mm": round(1000 * self.position_rms_m, 4),
+                "poses": len(self.per_pose_position_m)}
+
+
+def head_plan(pan_deg: float = 30.0, tilt_deg: float = 20.0, roll_deg: float = 10.0,
+              approach_deg: float = 2.0) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
+    """(fit angles, check angles): commanded (pan, tilt, roll) degrees for calibration and for validation.
+
+    Every joint is moved alone and in combination, so its axis is seen turning on its own; check angles lie
+    between the fit angles. approach_deg is used by the wizard to come at each angle from below.
+    """
+    del approach_deg
+    fit = [np.array(a, dtype=np.float64) for a in (
+        (0, 0, 0), (pan_deg, 0, 0), (-pan_deg, 0, 0), (0, tilt_deg, 0), (0, -tilt_deg / 2, 0),
+        (0, 0, roll_deg), (0, 0, -roll_deg), (pan_deg, tilt_deg, roll_deg), (-pan_deg, tilt_deg, -roll_deg),
+        (pan_deg / 2, -tilt_deg / 2, roll_deg / 2), (-pan_deg / 2, tilt_deg / 2, 0),
+        # More combinations: each costs one measurement and tightens axes, offsets and the zero pose.
+        (pan_deg, -tilt_deg / 2, -roll_deg), (-pan_deg, -tilt_deg / 2, roll_deg), (pan_deg / 2, tilt_deg, -roll_deg),
+        (-pan_deg / 2, tilt_deg, roll_deg), (0, tilt_deg / 2, roll_deg / 2), (pan_deg * 0.75, 0, -roll_deg / 2),
+        (-pan_deg * 0.75, tilt_deg * 0.75, 0), (pan_deg / 4, -tilt_deg / 4, -roll_deg))]
+    check = [np.array(a, dtype=np.float64) for a in (
+        (pan_deg * 0.7, tilt_deg * 0.3, -roll_deg * 0.4), (-pan_deg * 0.4, tilt_deg * 0.8, roll_deg * 0.6),
+        (pan_deg * 0.2, -tilt_deg * 0.3, roll_deg * 0.2))]
+    return fit, check
+
+
+def _perp_basis(a: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(a, helper)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(a, e1)
+
+
+def _log_rotation(R: NDArray[np.float64]) -> NDArray[np.float64]:
+    import cv2
+
+    v, _ = cv2.Rodrigues(np.asarray(R, dtype=np.float64))
+    return v.ravel()
+
+
+def _initial_model(angles: list[NDArray[np.float64]], poses: list[NDArray[np.float64]],
+                   nominal: HeadModel | None) -> HeadModel:
+    """Axes and points from poses where one joint moved alone from the zero pose (else the nominal model)."""
+    zero = [k for k, a in enumerate(angles) if np.allclose(a, 0.0)]
+    axes = nominal.axes.copy() if nominal is not None else np.eye(3)[[2, 1, 0]] * np.array([[1], [-1], [1]])
+    points = nominal.points.copy() if nominal is not None else np.tile(poses[0][:3, 3], (3, 1))
+    if not zero:
+        if nominal is None:
+            raise InputError("head calibration needs a pose at commanded angles (0, 0, 0) or a nominal head "
+                             "model to start from")
+        return HeadModel(axes, points, nominal.T_robot_from_projector_zero.copy())
+    T0 = poses[zero[0]]
+    for j in range(3):
+        moves = [k for k, a in enumerate(angles) if abs(a[j]) > 1.0 and np.allclose(np.delete(a, j), 0.0)]
+        estimates, pts = [], []
+        for k in moves:
+            M = poses[k] @ invert(T0)  # rotation about joint j's line
+            v = _log_rotation(M[:3, :3])
+            angle = np.linalg.norm(v)
+            if angle < 1e-6:
+                continue
+            axis = v / angle * np.sign(angles[k][j])
+            estimates.append(axis)
+            # Points p on the line satisfy (I - R) p = t; least squares gives the one nearest the origin.
+            p, *_ = np.linalg.lstsq(np.eye(3) - M[:3, :3], M[:3, 3], rcond=1e-9)  # rank 2: drop the axis
+            pts.append(p)
+        if estimates:
+            a = np.mean(estimates, axis=0)
+            axes[j] = a / np.linalg.norm(a)
+            points[j] = np.mean(pts, axis=0)
+    return HeadModel(axes, points, T0.copy())
+
+
+def fit_head(angles_deg: list[ArrayLike], T_base_from_projector: list[NDArray[np.float64]],
+             nominal: HeadModel | None = None) -> HeadFit:
+    """Fit the head model (in the poses' base frame, e.g. robot or camera_left) to measured projector poses.
+
+    angles_deg: commanded (pan, tilt, roll) per pose; T_base_from_projector: the measured poses (4x4).
+    """
+    angles = [np.asarray(a, dtype=np.float64).reshape(3) for a in angles_deg]
+    poses = [np.asarray(T, dtype=np.float64) for T in T_base_from_projector]
+    if len(angles) != len(poses):
+        raise InputError(f"head calibration: {len(angles)} angle sets but {len(poses)} measured poses")
+    if len(poses) < MIN_HEAD_POSES:
+        raise InputError(f"head calibration: {len(poses)} poses measured; at least {MIN_HEAD_POSES} are needed",
+                         "measure the projector at more head angles (each joint alone and combined)")
+    span = np.ptp(np.array(angles), axis=0)
+    for j, name in enumerate(("pan", "tilt", "roll")):
+        if span[j] < MIN_JOINT_SPAN_DEG:
+            raise InputError(f"head calibration: the {name} joint moved only {span[j]:.1f}° across the poses",
+                             f"move it by at least {MIN_JOINT_SPAN_DEG:.0f}° (both directions) while measuring")
+    init = _initial_model(angles, poses, nominal)
+    bases = [_perp_basis(a) for a in init.axes]
+
+    def model_from(x: NDArray[np.float64]) -> HeadModel:
+        axes = np.empty((3, 3))
+        points = np.empty((3, 3))
+        for j in range(3):
+            e1, e2 = bases[j]
+            a = init.axes[j] + x[4 * j] * e1 + x[4 * j + 1] * e2
+            axes[j] = a / np.linalg.norm(a)
+            points[j] = init.points[j] + x[4 * j + 2] * e1 + x[4 * j + 3] * e2
+        dR = rotation_about(x[12:15], np.linalg.norm(x[12:15])) if np.linalg.norm(x[12:15]) > 0 else np.eye(3)
+        T0 = init.T_robot_from_projector_zero
+        T_zero = make_pose(dR @ T0[:3, :3], T0[:3, 3] + x[15:18])
+        return HeadModel(axes, points, T_zero)
+
+    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        m = model_from(x)
+        out = []
+        for a, T in zip(angles, poses, strict=True):
+            P = m.T_robot_from_projector(a)
+            out.append(ROTATION_WEIGHT_M * _log_rotation(P[:3, :3].T @ T[:3, :3]))
+            out.append(P[:3, 3] - T[:3, 3])
+        return np.concatenate(out)
+
+    sol = least_squares(residuals, np.zeros(18), method="lm", xtol=FIT_TOLERANCE, ftol=FIT_TOLERANCE,
+                        gtol=FIT_TOLERANCE, max_nfev=5000)
+    model = model_from(sol.x)
+    rot, pos = head_errors(model, angles, poses)
+    return HeadFit(model, float(np.sqrt(np.mean(np.square(rot)))), float(np.sqrt(np.mean(np.square(pos)))),
+                   rot, pos)
+
+
+def head_errors(model: HeadModel, angles_deg: list[ArrayLike], T_base_from_projector: list[NDArray[np.float64]]
+                ) -> tuple[list[float], list[float]]:
+    """(rotation errors in degrees, position errors in metres) of the model's predictions vs measured poses."""
+    rot, pos = [], []
+    for a, T in zip(angles_deg, T_base_from_projector, strict=True):
+        P = model.T_robot_from_projector(a)
+        rot.append(rotation_angle_deg(P, T))
+        pos.append(float(np.linalg.norm(P[:3, 3] - np.asarray(T)[:3, 3])))
+    return rot, pos
+
+
+def rebase_head(model: HeadModel, T_new_from_base: NDArray[np.float64]) -> HeadModel:
+    """The same head expressed in another base frame (e.g. fitted in camera_left, wanted in robot)."""
+    R, t = T_new_from_base[:3, :3], T_new_from_base[:3, 3]
+    return HeadModel(axes=model.axes @ R.T, points=model.points @ R.T + t,
+                     T_robot_from_projector_zero=T_new_from_base @ model.T_robot_from_projector_zero,
+                     zero_offsets_deg=model.zero_offsets_deg.copy())

@@ -1,0 +1,62 @@
+"""Board views from image files named by glob patterns, with the checks a person needs to fix a capture set."""
+
+from __future__ import annotations
+
+import glob
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TypeVar
+
+from calibration.boards import Board, BoardView, detect_file
+from geometry.errors import InputError
+
+T = TypeVar("T")
+Tracker = Callable[[Iterable[T], str, int], Iterator[T]]
+
+
+def _plain_iter(items: Iterable[T], description: str, total: int) -> Iterator[T]:
+    del description, total
+    yield from items
+
+
+def expand(pattern: str, what: str) -> list[Path]:
+    """Files matching a glob pattern, sorted by name; InputError when there are none."""
+    files = sorted(Path(p) for p in glob.glob(str(Path(pattern).expanduser())) if Path(p).is_file())
+    if not files:
+        raise InputError(f"{what}: no files match {pattern!r}",
+                         "check the folder and quote the pattern so the shell does not expand it")
+    return files
+
+
+@dataclass
+class StereoImageSet:
+    """Aligned detections (None where the board was not found) and the files without a board."""
+
+    left_files: list[Path]
+    right_files: list[Path]
+    left: list[BoardView | None]
+    right: list[BoardView | None]
+    no_board: list[str] = field(default_factory=list)
+
+
+def detect_stereo_set(left_pattern: str, right_pattern: str, board: Board,
+                      track: Tracker = _plain_iter) -> StereoImageSet:
+    """Detect the board in every left/right image (paired by sorted name)."""
+    left_files = expand(left_pattern, "--left")
+    right_files = expand(right_pattern, "--right")
+    if len(left_files) != len(right_files):
+        raise InputError(f"{len(left_files)} left images ({left_pattern}) but {len(right_files)} right images "
+                         f"({right_pattern})", "give exactly one right image per left image; pairs are matched "
+                         "by sorted file name")
+    both = list(zip(left_files, right_files, strict=True))
+    left: list[BoardView | None] = []
+    right: list[BoardView | None] = []
+    for lf, rf in track(both, "finding the board", len(both)):
+        left.append(detect_file(board, lf))
+        right.append(detect_file(board, rf))
+    no_board = [str(f) for f, v in zip(left_files + right_files, left + right, strict=True) if v is None]
+    sizes = {v.image_size for v in left if v is not None}
+    if len(sizes) > 1:
+        raise InputError(f"left images have different sizes {sorted(sizes)}", "use one camera mode for all")
+    return StereoImageSet(left_files, right_files, left, right, no_board)

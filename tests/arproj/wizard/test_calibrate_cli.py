@@ -1,0 +1,118 @@
+"""`arproj calibrate stereo` / `projector` end to end on files, and their bad-input messages."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from geometry.rig import Rig
+
+DATA = "opencv-stereo-chessboard"
+
+
+@dataclass
+class Done:
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+@pytest.fixture
+def arproj(capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch) -> Callable[..., Done]:
+    """Run the `arproj` console entry point in-process (exit status, stdout, stderr)."""
+    from arproj.cli import main
+
+    def run(*args: str) -> Done:
+        capsys.readouterr()
+        monkeypatch.setattr(sys, "argv", ["arproj", *args])
+        try:
+            main()
+            code = 0
+        except SystemExit as done:
+            code = int(done.code or 0)
+        out, err = capsys.readouterr()
+        return Done(code, out, " ".join(err.split()))  # rich wraps long lines
+
+    return run
+
+
+@pytest.fixture(scope="module")
+def stereo_folder(shared_data: Path) -> Path:
+    folder = shared_data / DATA
+    if not folder.is_dir():
+        pytest.skip(f"{folder} is absent")
+    return folder
+
+
+@pytest.mark.realdata
+def test_stereo_writes_camera_info_and_rig_with_quality(arproj: Callable[..., Done], stereo_folder: Path,
+                                                       tmp_path: Path) -> None:
+    out = tmp_path / "rig"
+    done = arproj("calibrate", "stereo", "--left", str(stereo_folder / "left*.jpg"), "--right",
+                  str(stereo_folder / "right*.jpg"), "--board", "chessboard:9x6:0.025", "--out", str(out), "--json")
+    assert done.returncode == 0, done.stderr
+    figures = json.loads(done.stdout)
+    assert figures["pairs_used"] == 13
+    assert figures["reprojection_rms_px"] < 0.3  # OpenCV's two-stage pipeline: 0.447 px on the same pairs
+    assert figures["epipolar_error_px_per_image"] < 0.145
+    rig = Rig.load(out)
+    assert set(rig.intrinsics) == {"camera_left", "camera_right"}
+    T = rig.pose("T_camera_right_from_camera_left")
+    # The right camera sits ~3.3 squares to the right: a point at the left origin has x < 0 in the right frame.
+    assert -0.09 < T[0, 3] < -0.07
+    assert rig.quality["stereo"]["reprojection_rms_px"] == figures["reprojection_rms_px"]
+    assert (out / "camera_left.yaml").read_text().startswith("image_width: 640")
+    assert (out / "stereo_coverage.png").stat().st_size > 10_000
+
+
+@pytest.mark.realdata
+def test_bad_inputs_name_the_files(arproj: Callable[..., Done], stereo_folder: Path, tmp_path: Path) -> None:
+    images = tmp_path / "images"
+    images.mkdir()
+    for name in ("left01.jpg", "left02.jpg", "left03.jpg", "right01.jpg", "right02.jpg", "right03.jpg"):
+        shutil.copy(stereo_folder / name, images / name)
+    cv2.imwrite(str(images / "left04.jpg"), np.full((480, 640), 128, np.uint8))  # no board
+    shutil.copy(stereo_folder / "right04.jpg", images / "right04.jpg")
+    out = str(tmp_path / "out")
+
+    done = arproj("calibrate", "stereo", "--left", str(images / "left*.jpg"), "--right", str(images / "right*.jpg"),
+                  "--out", out)
+    assert done.returncode == 2
+    assert "left04.jpg" in done.stderr and "at least 4" in done.stderr and "Traceback" not in done.stderr
+
+    (images / "right04.jpg").unlink()
+    done = arproj("calibrate", "stereo", "--left", str(images / "left*.jpg"), "--right", str(images / "right*.jpg"),
+                  "--out", out)
+    assert done.returncode == 2 and "4 left images" in done.stderr and "3 right images" in done.stderr
+
+    (images / "right04.jpg").write_bytes(b"not a jpeg")
+    done = arproj("calibrate", "stereo", "--left", str(images / "left*.jpg"), "--right", str(images / "right*.jpg"),
+                  "--out", out)
+    assert done.returncode == 2 and "right04.jpg: not a readable image" in done.stderr
+
+    done = arproj("calibrate", "stereo", "--left", str(images / "nothing*.jpg"), "--right", "x*", "--out", out)
+    assert done.returncode == 2 and "no files match" in done.stderr
+
+
+def test_projector_command_bad_inputs(arproj: Callable[..., Done], tmp_path: Path) -> None:
+    done = arproj("calibrate", "projector", "--captures", str(tmp_path / "capture_*"), "--projector", "1280x800",
+                  "--out", str(tmp_path / "out"))
+    assert done.returncode == 2 and "no folders match" in done.stderr
+    pose = tmp_path / "capture_00"
+    pose.mkdir()
+    for k in range(5):
+        cv2.imwrite(str(pose / f"{k:02d}.png"), np.zeros((8, 8), np.uint8))
+    done = arproj("calibrate", "projector", "--captures", str(tmp_path / "capture_*"), "--projector", "1280x800",
+                  "--out", str(tmp_path / "out"))
+    assert done.returncode == 2 and "capture_00: 5 images" in done.stderr and "needs 44" in done.stderr
+    done = arproj("calibrate", "projector", "--captures", str(tmp_path / "capture_*"), "--projector", "big",
+                  "--out", str(tmp_path / "out"))
+    assert done.returncode == 2 and "WIDTHxHEIGHT" in done.stderr

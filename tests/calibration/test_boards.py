@@ -1,0 +1,59 @@
+"""Board specs and subpixel detection against rendered boards with known corner positions."""
+
+import numpy as np
+import pytest
+
+from calibration.boards import detect, parse_board
+from calibration.synthetic import PlaneRenderer, chessboard_albedo
+from geometry.errors import InputError
+from geometry.intrinsics import Intrinsics
+from geometry.poses import make_pose, rotation_about, transform_points
+
+CORNER_TOLERANCE_PX = 0.1  # noise 1 grey level, blur 0.6 px, 4x4 supersampled edges
+
+
+def test_parse_chessboard_and_charuco() -> None:
+    b = parse_board("chessboard:9x6:0.025")
+    assert (b.kind, b.pattern_size, b.square_m) == ("chessboard", (9, 6), 0.025)
+    assert b.object_points().shape == (54, 3)
+    assert np.allclose(b.object_points()[10], [0.025, 0.025, 0.0])
+    c = parse_board("charuco:7x5:0.04:0.03:DICT_4X4_50")
+    assert (c.kind, c.pattern_size, c.marker_m) == ("charuco", (6, 4), 0.03)
+
+
+@pytest.mark.parametrize("spec", ["chessboard:9x6", "chess:9x6:0.02", "chessboard:9by6:0.02",
+                                  "chessboard:9x6:-1", "chessboard:7x7:0.02", "charuco:7x5:0.04:0.05",
+                                  "charuco:7x5:0.04:0.03:DICT_NOPE"])
+def test_bad_specs_raise_input_error_naming_the_spec(spec: str) -> None:
+    with pytest.raises(InputError, match="board spec"):
+        parse_board(spec)
+
+
+def test_subpixel_corners_match_the_rendered_truth() -> None:
+    board = parse_board("chessboard:9x6:0.03")
+    cam = Intrinsics(600.0, 600.0, 319.5, 239.5, 640, 480, (-0.05, 0.01, 0.0, 0.0, 0.0))
+    R = rotation_about([1, 0.4, 0], np.radians(25))
+    T = make_pose(R, np.array([0.0, 0.0, 0.75]) - R @ np.array([0.12, 0.075, 0.0]))
+    img = PlaneRenderer(cam, T, chessboard_albedo(board), supersample=4).render(
+        None, np.random.default_rng(0), ambient=250.0, noise=1.0)
+    view = detect(board, img)
+    assert view is not None
+    truth = cam.project(transform_points(T, board.object_points()))
+    err = np.linalg.norm(view.image_points - truth, axis=1)
+    assert np.sqrt(np.mean(err ** 2)) < CORNER_TOLERANCE_PX
+
+
+def test_no_board_gives_none() -> None:
+    board = parse_board("chessboard:9x6:0.03")
+    assert detect(board, np.full((240, 320), 128, np.uint8)) is None
+
+
+def test_charuco_detection_finds_known_corners() -> None:
+    board = parse_board("charuco:7x5:0.04:0.03")
+    img = board.render(pixels_per_square=60, margin_squares=1.0)
+    view = detect(board, img)
+    assert view is not None and len(view.ids) >= 20
+    # In the printed image, corner id k sits at (margin + (1 + col) squares) with pixel centres at integers.
+    cols = board.pattern_size[0]
+    expected = np.column_stack([60 + 60 * (1 + view.ids % cols), 60 + 60 * (1 + view.ids // cols)]) - 0.5
+    assert np.max(np.abs(view.image_points - expected)) < 0.3

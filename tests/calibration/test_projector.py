@@ -1,0 +1,149 @@
+"""Projector calibration: Gray-code decoding vs OpenCV, Moreno & Taubin on rendered captures, inverse camera."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration.boards import parse_board
+from calibration.projector import (
+    BoardCaptures,
+    calibrate_inverse_camera,
+    calibrate_projector_with_board,
+    decode_gray_code,
+    gray_code_patterns,
+)
+from calibration.synthetic import PlaneRenderer, board_poses, chessboard_albedo, plane_facing
+from geometry.errors import InputError
+from geometry.intrinsics import Intrinsics
+from geometry.poses import invert, look_at, rotation_angle_deg, transform_points
+
+# No camera distortion: rendering then needs no per-pixel undistortion, which keeps the fixture fast.
+CAMERA = Intrinsics(470.0, 470.0, 241.0, 178.0, 480, 360)
+PROJECTOR = Intrinsics(400.0, 400.0, 127.5, 140.0, 256, 160, (0.02, -0.01, 0.0, 0.0, 0.0))  # lens shift
+T_PROJECTOR_FROM_CAMERA = invert(look_at([0.12, 0.02, 0.0], [0.0, 0.1, 0.8], up=[0, -1, 0]))
+BOARD = "chessboard:8x6:0.028"
+PROJ_SIZE = (PROJECTOR.width, PROJECTOR.height)
+
+
+@pytest.fixture(scope="module")
+def board_captures() -> list[BoardCaptures]:
+    rng = np.random.default_rng(1)
+    board = parse_board(BOARD)
+    patterns = gray_code_patterns(*PROJ_SIZE)
+    out = []
+    for k, T in enumerate(board_poses(board, 5, rng, distance_m=0.8, max_tilt_deg=30.0)):
+        # 3x3 supersampling: 2x2 edge sampling biases corners (and so the focal length) by ~0.5 %.
+        r = PlaneRenderer(CAMERA, T, chessboard_albedo(board), PROJECTOR, T_PROJECTOR_FROM_CAMERA, supersample=3)
+        out.append(BoardCaptures([r.render(p, rng) for p in patterns], f"pose_{k}"))
+    return out
+
+
+def test_vectorised_decoding_matches_opencv_get_proj_pixel(board_captures: list[BoardCaptures]) -> None:
+    rng = np.random.default_rng(0)
+    captures = board_captures[0].images
+    decoded = decode_gray_code(captures, PROJ_SIZE)
+    gray = cv2.structured_light.GrayCodePattern.create(*PROJ_SIZE)
+    gray.setWhiteThreshold(4)  # getProjPixel compares pattern vs inverse against the white threshold
+    ys, xs = np.nonzero(np.isfinite(decoded[..., 0]))
+    assert len(ys) > 2000
+    pick = rng.choice(len(ys), 300, replace=False)
+    patterns = captures[:-2]
+    for y, x in zip(ys[pick], xs[pick], strict=True):
+        error, pixel = gray.getProjPixel(patterns, int(x), int(y))
+        assert not error
+        assert tuple(pixel) == (int(decoded[y, x, 0]), int(decoded[y, x, 1]))
+
+
+def test_wrong_number_of_captures_is_an_input_error() -> None:
+    with pytest.raises(InputError, match="needs 34"):
+        decode_gray_code([np.zeros((4, 4), np.uint8)] * 7, PROJ_SIZE)
+
+
+def test_moreno_taubin_recovers_projector_with_known_camera(board_captures: list[BoardCaptures]) -> None:
+    board = parse_board(BOARD)
+    result = calibrate_projector_with_board(board, board_captures, PROJ_SIZE, camera=CAMERA)
+    p = result.projector
+    assert abs(p.fx / PROJECTOR.fx - 1) < 0.005 and abs(p.fy / PROJECTOR.fy - 1) < 0.005
+    assert abs(p.cx - PROJECTOR.cx) < 2.0 and abs(p.cy - PROJECTOR.cy) < 2.0
+    assert result.projector_rms_px < 0.3
+    T = result.T_projector_from_camera
+    assert np.linalg.norm(T[:3, 3] - T_PROJECTOR_FROM_CAMERA[:3, 3]) < 0.002
+
+
+def test_moreno_taubin_also_calibrates_the_camera(board_captures: list[BoardCaptures]) -> None:
+    board = parse_board(BOARD)
+    result = calibrate_projector_with_board(board, board_captures, PROJ_SIZE)
+    # Five views calibrate the camera only loosely (~0.6 %); the projector still meets its 0.5 % target.
+    assert abs(result.camera.fx / CAMERA.fx - 1) < 0.01
+    assert abs(result.projector.fx / PROJECTOR.fx - 1) < 0.005
+    assert abs(result.projector.cx - PROJECTOR.cx) < 2.0 and abs(result.projector.cy - PROJECTOR.cy) < 2.0
+
+
+def _wall_views(yaw_pitch: list[tuple[float, float]], noise_px: float, seed: int = 0) -> tuple[list, list]:
+    """Points on walls at given orientations (projector frame = reference) and their noisy projector pixels."""
+    rng = np.random.default_rng(seed)
+    pts, pix = [], []
+    for yaw, pitch in yaw_pitch:
+        T = plane_facing(2.0, yaw, pitch)  # T_projector_from_plane
+        xy = rng.uniform(-0.8, 0.8, (150, 2))
+        X = transform_points(T, np.column_stack([xy, np.zeros(150)]))
+        uv = PROJECTOR.project(X)
+        ok = (uv[:, 0] > 0) & (uv[:, 0] < PROJECTOR.width) & (uv[:, 1] > 0) & (uv[:, 1] < PROJECTOR.height)
+        pts.append(X[ok])
+        pix.append(uv[ok] + rng.normal(0, noise_px, (ok.sum(), 2)))
+    return pts, pix
+
+
+def test_inverse_camera_from_wall_points_at_varied_poses() -> None:
+    pts, pix = _wall_views([(0, 0), (20, 0), (-20, 5), (0, 15), (10, -15), (15, 15)], noise_px=0.1)
+    result = calibrate_inverse_camera(pts, pix, PROJ_SIZE)
+    p = result.projector
+    assert abs(p.fx / PROJECTOR.fx - 1) < 0.002 and abs(p.cy - PROJECTOR.cy) < 1.0
+    for T in result.T_projector_from_view:  # reference frame = projector here
+        assert rotation_angle_deg(T) < 0.25  # trades with the principal point: 1 px ≈ 0.14°
+        assert np.linalg.norm(T[:3, 3]) < 0.005  # focal error x 2 m along the axis
+
+
+def test_flat_wall_at_one_orientation_is_degenerate() -> None:
+    pts, pix = _wall_views([(5, 0), (5.5, 0.5), (4.5, -0.5), (5, 1)], noise_px=0.1)
+    with pytest.raises(InputError, match="degenerate"):
+        calibrate_inverse_camera(pts, pix, PROJ_SIZE)
+    with pytest.raises(InputError, match="at least 3"):
+        calibrate_inverse_camera(pts[:2], pix[:2], PROJ_SIZE)
+
+
+def test_stereo_gray_code_path_recovers_projector_as_inverse_camera() -> None:
+    """Gray code on a bare wall at four orientations, decoded in both cameras, triangulated, inverse camera."""
+    from calibration.projector import wall_points_from_stereo
+    from calibration.synthetic import uniform_albedo
+    from geometry.poses import make_pose
+
+    left = Intrinsics(300.0, 300.0, 159.5, 119.5, 320, 240)
+    right = Intrinsics(305.0, 305.0, 161.0, 118.0, 320, 240)
+    T_right_from_left = make_pose(None, [-0.15, 0.0, 0.0])
+    projector = Intrinsics(160.0, 160.0, 63.5, 70.0, 128, 80, (0.02, 0.0, 0.0, 0.0, 0.0))
+    T_projector_from_left = invert(look_at([0.07, 0.03, 0.0], [0.07, 0.1, 1.5], up=[0, -1, 0]))
+    patterns = gray_code_patterns(projector.width, projector.height)
+    rng = np.random.default_rng(4)
+    points, pixels = [], []
+    for yaw, pitch in ((0, 0), (18, 4), (-16, -6), (5, 16)):
+        T_left_from_wall = plane_facing(1.5, yaw, pitch)
+        decoded = []
+        for intr, T_cam_from_left in ((left, np.eye(4)), (right, T_right_from_left)):
+            r = PlaneRenderer(intr, T_cam_from_left @ T_left_from_wall, uniform_albedo(), projector,
+                              T_projector_from_left @ invert(T_cam_from_left), supersample=1)
+            decoded.append(decode_gray_code([r.render(p, rng) for p in patterns], projector.size))
+        X, uv = wall_points_from_stereo(decoded[0], decoded[1], left, right, T_right_from_left, projector.size,
+                                        step_px=8)
+        assert len(X) > 60
+        points.append(X)
+        pixels.append(uv)
+    result = calibrate_inverse_camera(points, pixels, projector.size)
+    p = result.projector
+    assert abs(p.fx / projector.fx - 1) < 0.005 and abs(p.fy / projector.fy - 1) < 0.005
+    assert abs(p.cx - projector.cx) < 2.0 and abs(p.cy - projector.cy) < 2.0
+    for T in result.T_projector_from_view:  # every wall pose: the same projector pose in camera_left
+        assert np.linalg.norm(T[:3, 3] - T_projector_from_left[:3, 3]) < 0.01
+        assert rotation_angle_deg(T, T_projector_from_left) < 0.3

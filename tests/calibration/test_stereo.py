@@ -1,0 +1,95 @@
+"""Stereo calibration: synthetic ground truth (cv2.projectPoints), the OpenCV convention, bad input, real data."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibration.boards import BoardView, parse_board
+from calibration.stereo import calibrate_camera, calibrate_stereo
+from calibration.synthetic import board_poses
+from geometry.errors import InputError
+from geometry.intrinsics import Intrinsics
+from geometry.poses import make_pose, rotation_about, rotation_angle_deg, transform_points
+
+LEFT = Intrinsics(700.0, 702.0, 318.0, 243.0, 640, 480, (-0.2, 0.07, 0.001, -0.0005, 0.0))
+RIGHT = Intrinsics(695.0, 696.0, 325.0, 236.0, 640, 480, (-0.18, 0.05, -0.0008, 0.0004, 0.0))
+T_RIGHT_FROM_LEFT = make_pose(rotation_about([0.1, 1, 0.05], np.radians(2.0)), [-0.12, 0.002, 0.001])
+BOARD = parse_board("chessboard:9x6:0.03")
+NOISE_PX = 0.05
+
+
+def synthetic_pairs(n: int, seed: int = 0, frontal: bool = False) -> tuple[list[BoardView], list[BoardView]]:
+    """Board corners projected with cv2.projectPoints (through Intrinsics.project) plus Gaussian noise."""
+    rng = np.random.default_rng(seed)
+    left, right = [], []
+    for k, T in enumerate(board_poses(BOARD, n, rng, distance_m=0.7, max_tilt_deg=2.0 if frontal else 35.0)):
+        if frontal:
+            T[:3, :3] = np.eye(3)
+        pl = transform_points(T, BOARD.object_points())
+        pr = transform_points(T_RIGHT_FROM_LEFT, pl)
+        for intr, pts, out, side in ((LEFT, pl, left, "left"), (RIGHT, pr, right, "right")):
+            uv = intr.project(pts) + rng.normal(0, NOISE_PX, (len(pts), 2))
+            out.append(BoardView(uv, BOARD.object_points(), np.arange(len(uv)), (640, 480), f"{side}{k:02d}.png"))
+    return left, right
+
+
+def test_recovers_intrinsics_and_right_from_left_pose() -> None:
+    left, right = synthetic_pairs(12)
+    calib = calibrate_stereo(left, right, BOARD)
+    for est, true in ((calib.left, LEFT), (calib.right, RIGHT)):
+        assert abs(est.fx / true.fx - 1) < 0.002 and abs(est.fy / true.fy - 1) < 0.002
+        assert abs(est.cx - true.cx) < 1.0 and abs(est.cy - true.cy) < 1.0
+    # OpenCV's R, T (X_right = R X_left + T) must come out as T_right_from_left.
+    assert np.allclose(calib.T_right_from_left[:3, 3], T_RIGHT_FROM_LEFT[:3, 3], atol=1e-3)
+    assert rotation_angle_deg(calib.T_right_from_left, T_RIGHT_FROM_LEFT) < 0.05
+    assert abs(calib.baseline_m - 0.12) < 5e-4
+    assert calib.rms_px < 2 * NOISE_PX
+    assert calib.epipolar_px_per_image < 1.5 * NOISE_PX  # both points noisy: E|d| ≈ 1.13 σ
+
+
+def test_outlier_view_is_rejected_and_named() -> None:
+    left, right = synthetic_pairs(10, seed=3)
+    bad = left[4]
+    bad.image_points = bad.image_points + np.random.default_rng(5).normal(0, 3.0, bad.image_points.shape)
+    calib = calibrate_stereo(left, right, BOARD)
+    assert any("left04.png" in name for name in calib.rejected)
+    assert abs(calib.left.fx / LEFT.fx - 1) < 0.003
+
+
+def test_too_few_views_and_frontal_only_are_input_errors() -> None:
+    left, right = synthetic_pairs(3)
+    with pytest.raises(InputError, match="at least 4"):
+        calibrate_stereo(left, right, BOARD)
+    left, right = synthetic_pairs(8, frontal=True)
+    with pytest.raises(InputError, match="frontal"):
+        calibrate_camera(left, camera="camera_left")
+    with pytest.raises(InputError, match="3 left images but 2 right"):
+        calibrate_stereo(left[:3], right[:2], BOARD)
+
+
+def test_coverage_names_missing_tilts_and_regions() -> None:
+    left, right = synthetic_pairs(8)
+    calib = calibrate_stereo(left, right, BOARD)
+    assert set(calib.coverage) >= {"regions_missing", "tilts_missing", "region_share"}
+    assert abs(sum(map(sum, calib.coverage["region_share"])) - 1.0) < 1e-6
+    # All boards near the centre: the image corners are reported missing.
+    assert "top-left" in calib.coverage["regions_missing"]
+
+
+@pytest.mark.realdata
+def test_real_images_held_out_beat_the_two_stage_opencv_pipeline(shared_data) -> None:
+    from arproj.bench.calibration import held_out_comparison
+
+    folder = shared_data / "opencv-stereo-chessboard"
+    if not folder.is_dir():
+        pytest.skip(f"{folder} is absent")
+    figures = held_out_comparison(folder, attribution=False)
+    ours, two_stage, sample = figures["arproj"], figures["opencv two-stage"], figures["opencv stereo_calib"]
+    best_epi = min(two_stage["epipolar_px_per_image"], sample["epipolar_px_per_image"])
+    best_rms = min(two_stage["reprojection_rms_px"], sample["reprojection_rms_px"])
+    assert ours["epipolar_px_per_image"] < best_epi
+    assert ours["reprojection_rms_px"] < best_rms
+    # The reference figures of the data's README are reproduced by the peers (all 13 pairs).
+    assert abs(figures["reference"]["opencv stereo_calib rms"] - 0.605) < 0.01
+    assert abs(figures["reference"]["opencv two-stage rms"] - 0.447) < 0.01
