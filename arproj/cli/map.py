@@ -1,0 +1,85 @@
+"""`arproj map LOG --out DIR`: build the in-wall map from a scan log and write its exports."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from arproj.console import console, err_console, progress_bar
+
+
+def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+    @app.command("map")
+    def map_command(
+        log: Path = typer.Argument(..., help="Scan log (SQLite) written by `arproj scan --log LOG`."),
+        out: Path = typer.Option(Path("map"), "--out", help="Folder for wall.glb, objects.json, map.png, "
+                                 "signals.png and objects.dxf."),
+        resolution_mm: float = typer.Option(4.0, "--resolution", help="Map cell size in millimetres."),
+        no_stitch: bool = typer.Option(False, "--no-stitch", help="Use the logged sample positions as they "
+                                       "are (skip frame alignment)."),
+        signal_y: float | None = typer.Option(None, "--signal-y", help="Height (m) of the line whose raw "
+                                              "readings signals.png shows (default: mid-wall)."),
+        range_images: Path | None = typer.Option(None, "--range-images", help="Range images (.npz: depth_k, "
+                                                 "K_k, T_world_from_camera_k, optional T_world_from_wall) "
+                                                 "whose merged surface becomes wall.glb's mesh."),
+        wall: Path | None = typer.Option(None, "--wall", help="Wall file with the truth (simulation): print "
+                                         "recall, precision and position error against it."),
+    ) -> None:
+        """Build the in-wall map from a scan log: occupancy grids, stitched frames, classified objects, and
+        the exports the projection session and CAD read."""
+        from geometry.errors import InputError
+        from mapping import export
+        from mapping.pipeline import MapSettings, build_map, load_scan
+
+        if not resolution_mm > 0:
+            raise InputError(f"--resolution {resolution_mm}: the cell size must be a positive number of mm")
+        with progress_bar() as bar:
+            task = bar.add_task("mapping", total=7)
+            bar.update(task, description="reading the log")
+            data = load_scan(log)
+            bar.advance(task)
+            bar.update(task, description=f"mapping {data.n_samples:,} samples")
+            result = build_map(data, MapSettings(resolution_m=resolution_mm / 1000.0, stitch=not no_stitch))
+            bar.advance(task)
+            out.mkdir(parents=True, exist_ok=True)
+            mesh = None
+            if range_images is not None:
+                from mapping.surface import load_range_images, wall_mesh_from_range_images
+
+                bar.update(task, description="meshing the range images")
+                views, T_world_from_wall = load_range_images(str(range_images))
+                mesh = wall_mesh_from_range_images(views, result.bounds, T_world_from_wall)
+            steps = [
+                ("wall.glb", lambda: export.write_wall_glb(result, out / "wall.glb", mesh)),
+                ("objects.json", lambda: export.write_objects_json(result.objects, out / "objects.json",
+                                                                   export.scanned_regions(result))),
+                ("map.png", lambda: export.write_map_png(result, out / "map.png", title=f"In-wall map of {log.name}")),
+                ("signals.png", lambda: export.write_signal_plot(data, result, out / "signals.png", signal_y)),
+                ("objects.dxf", lambda: export.write_dxf(result.objects, out / "objects.dxf")),
+            ]
+            written = []
+            for name, step in steps:
+                bar.update(task, description=f"writing {name}")
+                written.append(step())
+                bar.advance(task)
+        for note in result.notes:
+            console.print(note, highlight=False)
+        for w in result.warnings:
+            err_console.print(f"[yellow]warning:[/] {w}", highlight=False)
+        counts: dict[str, int] = {}
+        for o in result.objects:
+            counts[o.cls] = counts.get(o.cls, 0) + 1
+        summary = ", ".join(f"{n} {c.replace('_', ' ')}" for c, n in sorted(counts.items())) or "nothing"
+        console.print(f"found {summary}", highlight=False)
+        for path in written:
+            console.print(f"wrote {path}", highlight=False)
+        if wall is not None:
+            from mapping.evaluate import evaluate
+            from scanner.wall import load_wall
+
+            ev = evaluate(result.objects, load_wall(wall))
+            mean, p95 = ev.position_mm()
+            console.print(f"against {wall}: recall {ev.recall:.1%} ({ev.n_found}/{ev.n_targets}), precision "
+                          f"{ev.precision:.1%}, position error mean {mean:.2f} mm, p95 {p95:.2f} mm, "
+                          f"class accuracy {ev.class_accuracy():.1%}", highlight=False)

@@ -1,0 +1,147 @@
+"""Extracted objects against a wall file's truth: recall, precision, position and angle error, classes.
+
+Targets are the pipes and cables within the sensors' depth range (metal pipes and copper cables no deeper than
+`max_depth_m`; plastic pipes are invisible to the inductive and AC sensors and are reported apart). A target is
+*found* when at least `min_coverage` of its centre line lies within `match_m` of detected lines. Precision is
+the fraction of detected line length within `match_m` of any pipe or cable (plastic and deep ones included:
+they are real). Position error: distance of detected line points to the truth centre line (points matched
+within `match_m`). Angle error: per detected straight piece, against the nearest truth segment. Class: the
+length-weighted majority class of detections along the target, against power_line (cables) or metal_pipe.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mapping.objects import MapObject
+from scanner.wall import Wall, WallObject, densify, distance_to_polyline
+
+MATCH_M = 0.015
+MIN_COVERAGE = 0.7
+MAX_DEPTH_M = 0.05
+
+
+def truth_class(obj: WallObject) -> str:
+    if obj.kind == "cable":
+        return "power_line"
+    if obj.kind == "pipe":
+        return "metal_pipe" if obj.is_metal else "plastic_pipe"
+    if obj.kind in ("screw", "nail"):
+        return "fastener"
+    if obj.kind in ("stud", "beam"):
+        return "wood" if obj.material == "wood" else "metal"
+    if obj.kind == "plate":
+        return "metal"
+    return obj.kind
+
+
+def is_target(obj: WallObject, max_depth_m: float = MAX_DEPTH_M) -> bool:
+    return (obj.kind == "cable" or (obj.kind == "pipe" and obj.is_metal)) and obj.depth_m <= max_depth_m
+
+
+@dataclass
+class Evaluation:
+    n_targets: int = 0
+    n_found: int = 0
+    detected_length_m: float = 0.0
+    true_length_m: float = 0.0  # detected length within match of a real line
+    position_errors_m: list[float] = field(default_factory=list)
+    angle_errors_deg: list[float] = field(default_factory=list)
+    class_pairs: list[tuple[str, str]] = field(default_factory=list)  # (truth, predicted) per found target
+    missed: list[str] = field(default_factory=list)
+
+    def merge(self, other: Evaluation) -> None:
+        self.n_targets += other.n_targets
+        self.n_found += other.n_found
+        self.detected_length_m += other.detected_length_m
+        self.true_length_m += other.true_length_m
+        self.position_errors_m += other.position_errors_m
+        self.angle_errors_deg += other.angle_errors_deg
+        self.class_pairs += other.class_pairs
+        self.missed += other.missed
+
+    @property
+    def recall(self) -> float:
+        return self.n_found / self.n_targets if self.n_targets else float("nan")
+
+    @property
+    def precision(self) -> float:
+        return self.true_length_m / self.detected_length_m if self.detected_length_m else float("nan")
+
+    def position_mm(self) -> tuple[float, float]:
+        e = np.asarray(self.position_errors_m) * 1000.0
+        return (float(e.mean()), float(np.percentile(e, 95))) if e.size else (float("nan"), float("nan"))
+
+    def angle_deg(self) -> tuple[float, float]:
+        a = np.asarray(self.angle_errors_deg)
+        return (float(a.mean()), float(np.percentile(a, 95))) if a.size else (float("nan"), float("nan"))
+
+    def class_accuracy(self, classes: tuple[str, ...] = ("power_line", "metal_pipe")) -> float:
+        pairs = [(t, p) for t, p in self.class_pairs if t in classes]
+        return sum(t == p for t, p in pairs) / len(pairs) if pairs else float("nan")
+
+
+def _segments_angle(d1: NDArray[np.float64], d2: NDArray[np.float64]) -> float:
+    c = abs(float(d1 @ d2) / (np.linalg.norm(d1) * np.linalg.norm(d2)))
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def evaluate(objects: list[MapObject], wall: Wall, match_m: float = MATCH_M,
+             min_coverage: float = MIN_COVERAGE, max_depth_m: float = MAX_DEPTH_M,
+             region: tuple[float, float, float, float] | None = None) -> Evaluation:
+    """Compare detected line objects with the wall's pipes and cables (region: x0, y0, x1, y1 scanned)."""
+    ev = Evaluation()
+    lines = [o for o in objects if o.kind == "line"]
+    real = [o for o in wall.objects if o.kind in ("pipe", "cable")]
+    for o in lines:
+        pts = densify(o.points_m, 0.002)
+        seg_len = np.linalg.norm(np.diff(o.points_m, axis=0), axis=1).sum() / max(len(pts) - 1, 1)
+        d = np.min([distance_to_polyline(pts, r.points_m) for r in real], axis=0) if real else \
+            np.full(len(pts), np.inf)
+        ev.detected_length_m += seg_len * len(pts)
+        ev.true_length_m += seg_len * float((d < match_m).sum())
+        # position error: against the nearest real line; but ignore points near a crossing/bend vertex of truth
+        near = d < match_m
+        ev.position_errors_m += d[near].tolist()
+        for a, b in zip(o.points_m[:-1], o.points_m[1:], strict=True):
+            if np.linalg.norm(b - a) < 0.03:
+                continue
+            # the truth segment this piece follows: least mean distance over points along it (a midpoint
+            # alone may sit on a crossing line)
+            probe = a + np.linspace(0.1, 0.9, 9)[:, None] * (b - a)
+            best = None
+            for r in real:
+                for ra, rb in zip(r.points_m[:-1], r.points_m[1:], strict=True):
+                    dd = float(distance_to_polyline(probe, np.array([ra, rb])).mean())
+                    if dd < match_m and (best is None or dd < best[0]):
+                        best = (dd, rb - ra)
+            if best is not None:
+                ev.angle_errors_deg.append(_segments_angle(b - a, best[1]))
+    for t in wall.objects:
+        if not is_target(t, max_depth_m):
+            continue
+        probe = densify(t.points_m, 0.005)
+        if region is not None:
+            x0, y0, x1, y1 = region
+            probe = probe[(probe[:, 0] >= x0) & (probe[:, 0] <= x1) & (probe[:, 1] >= y0) & (probe[:, 1] <= y1)]
+            if probe.shape[0] < 10:
+                continue
+        ev.n_targets += 1
+        if not lines:
+            ev.missed.append(t.id)
+            continue
+        dists = np.stack([distance_to_polyline(probe, o.points_m) for o in lines])
+        covered = dists.min(axis=0) < match_m
+        if covered.mean() >= min_coverage:
+            ev.n_found += 1
+            votes: dict[str, float] = {}
+            owner = dists.argmin(axis=0)
+            for k in owner[covered]:
+                votes[lines[k].cls] = votes.get(lines[k].cls, 0.0) + 1.0
+            ev.class_pairs.append((truth_class(t), max(votes, key=votes.get)))  # type: ignore[arg-type]
+        else:
+            ev.missed.append(t.id)
+    return ev

@@ -1,0 +1,218 @@
+"""Sensor fusion and classification, using the sensors' cross-sensitivity (paper sections 3 and 6).
+
+What each channel sees (GMS120-class scanner):
+  * AC: a sharp, narrow peak over a live cable; a flat *medium* level on metal near a power line (coupling),
+    so a pipe near a cable shows in the AC map as a broad, low ridge without a sharp crest;
+  * inductive: any metal — pipes, plates, screws, nails, and the copper of power lines (a weaker, narrower
+    peak than a pipe's);
+  * capacitive: wood (studs, beams) and water as a raised level, cavities as a lowered one.
+
+Per detected object we measure, along its centre line, the height of each channel's signal over its
+background in robust standard deviations (z) and the AC crest's sharpness (the AC height on the line relative
+to the AC level 2.5 cm to either side). Logistic evidence functions turn them into class probabilities:
+    power_line  AC crest high and sharp (with or without an inductive peak)
+    metal_pipe  inductive ridge, AC without a sharp crest, wider than a cable
+    metal       metal for sure but not which (short ridge, plates, ambiguous widths)
+    fastener    small round inductive peak
+    wood / cavity  raised / lowered capacitive regions
+The confidence is the winning class's probability.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from mapping.grid import GridInfo, WallGrid
+from mapping.objects import MapObject, normalise
+
+CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "wood", "cavity", "fastener")
+
+
+@dataclass(frozen=True)
+class FusionParams:
+    """Thresholds of the evidence functions (z = robust standard deviations over the background)."""
+
+    ac_crest_z: float = 30.0  # AC height on a line that says "live cable"
+    ac_sharpness: float = 0.7  # (on-line − beside) / on-line AC above this is a crest, below a plateau
+    side_offset_m: float = 0.025  # where "beside the line" is measured
+    metal_min_z: float = 6.0  # inductive height that says "metal here"
+    # Depth-compensated inductive strength, relative to a 15 mm copper pipe at the same depth: copper cables
+    # are ~0.1, pipes 0.5–2, areas of sheet metal (plates, steel studs) seen as a ridge ≫ 2.
+    cable_max_ratio: float = 0.48
+    area_min_ratio: float = 8.0
+    softness: float = 0.15  # relative width of the logistic transitions
+
+
+@dataclass(frozen=True)
+class InductiveModel:
+    """What fusion needs of the scanner's inductive sensor (scanner.sensor_model.SensorConfig names).
+
+    The footprint is Gaussian, σ_u across × σ_v along the device, widening by `spread_per_depth`·depth; a
+    line's peak falls off as ((d_ref + d0)/(depth + d0))³. `pipe_strength` is the raw peak of a 15 mm copper
+    pipe at the reference depth; readings are display units 1 − exp(−(raw + baseline)).
+    """
+
+    ind_sigma_u_m: float = 0.011
+    ind_sigma_v_m: float = 0.016
+    spread_per_depth: float = 0.55
+    reference_depth_m: float = 0.02
+    depth_offset_m: float = 0.015
+    pipe_strength: float = 1.7
+
+    @classmethod
+    def from_meta(cls, sensor: dict | None) -> InductiveModel:
+        sensor = sensor or {}
+        names = ("ind_sigma_u_m", "ind_sigma_v_m", "spread_per_depth", "reference_depth_m", "depth_offset_m")
+        return cls(**{k: float(sensor[k]) for k in names if isinstance(sensor.get(k), (int, float))})
+
+    def depth_from_width(self, fwhm_m: float, direction: NDArray[np.float64]) -> float:
+        """Depth (m) at which a line along `direction` gives a cross profile of this half-maximum width."""
+        d = direction / max(float(np.linalg.norm(direction)), 1e-12)
+        nx, ny = -d[1], d[0]
+        base = nx**2 * self.ind_sigma_u_m**2 + ny**2 * self.ind_sigma_v_m**2
+        sigma2 = (fwhm_m / 2.3548) ** 2
+        return float(np.sqrt(max(sigma2 - base, 0.0)) / self.spread_per_depth)
+
+    def pipe_peak_raw(self, depth_m: float, direction: NDArray[np.float64] | None = None) -> float:
+        """Raw peak of a 15 mm copper pipe at this depth running along `direction` (the line integral of
+        the anisotropic footprint: a horizontal line meets its short axis and peaks lower)."""
+        g = (self.reference_depth_m + self.depth_offset_m) / (depth_m + self.depth_offset_m)
+        factor = 1.0
+        if direction is not None:
+            t = np.asarray(direction, dtype=np.float64) / max(float(np.linalg.norm(direction)), 1e-12)
+            su2 = self.ind_sigma_u_m**2 + (self.spread_per_depth * depth_m) ** 2
+            sv2 = self.ind_sigma_v_m**2 + (self.spread_per_depth * depth_m) ** 2
+            factor = 1.0 / np.sqrt(sv2 * (t[0] ** 2 / su2 + t[1] ** 2 / sv2))
+        return float(self.pipe_strength * g**3 * factor)
+
+
+def _raw(display: NDArray[np.float64] | float) -> NDArray[np.float64]:
+    """Display units 1 − exp(−raw) back to raw units (saturation undone)."""
+    return -np.log(np.clip(1.0 - np.asarray(display, dtype=np.float64), 1e-6, 1.0))
+
+
+def _sigmoid(x: NDArray[np.float64] | float) -> NDArray[np.float64] | float:
+    return 1.0 / (1.0 + np.exp(-np.asarray(x, dtype=np.float64)))
+
+
+def _sample(z: NDArray[np.float64], info: GridInfo, xy: NDArray[np.float64]) -> NDArray[np.float64]:
+    pix = info.to_pixel(xy)
+    return ndimage.map_coordinates(z, [pix[:, 1], pix[:, 0]], order=1, mode="nearest")
+
+
+def _densify(poly: NDArray[np.float64], step: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Points along a polyline and the unit normal at each, (k, 2) each."""
+    pts, normals = [], []
+    for a, b in itertools.pairwise(poly):
+        d = b - a
+        length = float(np.linalg.norm(d))
+        if length < 1e-9:
+            continue
+        n = max(1, int(np.ceil(length / step)))
+        t = (np.arange(n) + 0.5) / n
+        pts.append(a + t[:, None] * d)
+        normals.append(np.repeat([[-d[1] / length, d[0] / length]], n, axis=0))
+    if not pts:
+        return poly[:1], np.array([[1.0, 0.0]])
+    return np.vstack(pts), np.vstack(normals)
+
+
+class Fuser:
+    """Measures channel features of objects on one WallGrid and classifies them."""
+
+    def __init__(self, grid: WallGrid, params: FusionParams | None = None,
+                 inductive: InductiveModel | None = None) -> None:
+        self.grid = grid
+        self.params = params or FusionParams()
+        self.inductive = inductive or InductiveModel()
+        self.z: dict[str, NDArray[np.float64]] = {}
+        self.signal: dict[str, NDArray[np.float64]] = {}
+        self.background: dict[str, float] = {}
+        for s in grid.sensors:
+            self.signal[s] = grid.signal(s)
+            self.z[s], self.background[s], _ = normalise(self.signal[s])
+
+    def features(self, obj: MapObject) -> dict[str, float]:
+        p = self.params
+        info = self.grid.info
+        pts, normals = _densify(obj.points_m, 0.005) if obj.kind == "line" else (obj.points_m, None)
+        f: dict[str, float] = {"length_m": obj.length_m(), "width_m": obj.width_m}
+        for s, z in self.z.items():
+            f[f"{s}_z"] = float(np.median(_sample(z, info, pts)))
+        if "ac" in self.z and normals is not None:
+            on = _sample(self.z["ac"], info, pts)
+            side = 0.5 * (_sample(self.z["ac"], info, pts + p.side_offset_m * normals)
+                          + _sample(self.z["ac"], info, pts - p.side_offset_m * normals))
+            f["ac_sharpness"] = float(np.median((on - side) / np.maximum(np.abs(on), 1.0)))
+        if "inductive" in self.signal and obj.kind == "line":
+            sig = np.nan_to_num(self.signal["inductive"], nan=self.background["inductive"])
+            peak = float(np.median(_sample(sig, info, pts)))
+            amp = float(_raw(peak) - _raw(self.background["inductive"]))
+            seg = np.diff(obj.points_m, axis=0)
+            main = seg[int(np.argmax(np.linalg.norm(seg, axis=1)))]
+            depth = self.inductive.depth_from_width(obj.width_m, main)
+            f["inductive_raw"] = amp
+            f["depth_est_m"] = depth
+            f["strength_ratio"] = amp / self.inductive.pipe_peak_raw(depth, main)
+        return f
+
+    def classify(self, obj: MapObject) -> MapObject:
+        """Fills obj.cls, obj.confidence and obj.features; returns obj."""
+        p = self.params
+        f = self.features(obj)
+        obj.features.update(f)
+        s = p.softness
+        ind = f.get("inductive_z", 0.0)
+        metal = float(_sigmoid((ind - p.metal_min_z) / (s * p.metal_min_z)))
+        if obj.kind == "point":
+            obj.cls, obj.confidence = "fastener", metal
+            return obj
+        if obj.kind == "outline":
+            cap = f.get("capacitive_z", 0.0)
+            if obj.features.get("polarity", 1.0) > 0 and ind > p.metal_min_z:
+                obj.cls, obj.confidence = "metal", metal
+            elif cap >= 0:
+                obj.cls, obj.confidence = "wood", float(_sigmoid((cap - 8.0) / (s * 8.0)))
+            else:
+                obj.cls, obj.confidence = "cavity", float(_sigmoid((-cap - 8.0) / (s * 8.0)))
+            return obj
+        ac = f.get("ac_z", 0.0)
+        sharp = f.get("ac_sharpness", 0.0)
+        live = float(_sigmoid((ac - p.ac_crest_z) / (s * p.ac_crest_z)) * _sigmoid((sharp - p.ac_sharpness) / 0.05))
+        log_ratio = float(np.log(max(f.get("strength_ratio", 1.0), 1e-6)))
+        copper_cable = float(_sigmoid((np.log(p.cable_max_ratio) - log_ratio) / 0.3))
+        sheet = float(_sigmoid((log_ratio - np.log(p.area_min_ratio)) / 0.3))
+        scores = {
+            "power_line": live + (1 - live) * metal * copper_cable,
+            "metal_pipe": (1 - live) * metal * (1 - copper_cable) * (1 - sheet),
+            "metal": (1 - live) * metal * sheet,
+        }
+        obj.cls = max(scores, key=scores.get)  # type: ignore[arg-type]
+        total = sum(scores.values())
+        obj.confidence = float(scores[obj.cls] / total) if total > 1e-9 else 0.0
+        return obj
+
+
+def class_map(grid: WallGrid, threshold: float = 0.7) -> tuple[NDArray[np.int16], NDArray[np.float64]]:
+    """Per-cell class from the log-odds layers: (index into CLASSES or −1, its probability).
+
+    AC occupancy → power_line, inductive → metal, capacitive above → wood. Objects, not cells, carry the
+    finer classes; this map is the background of the texture.
+    """
+    shape = grid.info.shape
+    idx = np.full(shape, -1, np.int16)
+    prob = np.zeros(shape)
+    order = [("capacitive", "wood"), ("inductive", "metal"), ("ac", "power_line")]  # later wins
+    for sensor, cls in order:
+        if sensor not in grid.models:
+            continue
+        p = np.nan_to_num(grid.probability(sensor), nan=0.0)
+        hit = p >= threshold
+        idx[hit] = CLASSES.index(cls)
+        prob[hit] = p[hit]
+    return idx, prob

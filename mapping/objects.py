@@ -1,0 +1,530 @@
+"""Objects from signal maps: pipes and cables as polylines, fasteners as points, studs and cavities as outlines.
+
+Lines are found with Steger's sub-pixel ridge detector (Hessian of the Gaussian-smoothed signal: a ridge point
+lies where the first derivative across the ridge vanishes, to a fraction of a cell), linked into chains of
+points whose directions agree, ordered along each chain, simplified into polylines (Douglas–Peucker), refined
+by least squares per straight piece (vertices at the intersections of neighbouring pieces), and finally joined
+across small gaps (a crossing pipe interrupts a ridge) and at bends.
+
+Everything is in wall coordinates, metres: `Polyline.points_m` (k, 2).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
+from scipy.spatial import cKDTree
+
+from mapping import tolerances as tol
+from mapping.grid import GridInfo
+
+BRANCH_OFFSET_M = 0.008  # ridge points farther than this from a chain's main path form a branch of their own
+
+
+@dataclass
+class MapObject:
+    """One extracted object. kind: 'line' | 'point' | 'outline'. cls: class name (fusion fills it)."""
+
+    kind: str
+    points_m: NDArray[np.float64]  # (k, 2) wall metres; one point for 'point', closed ring for 'outline'
+    width_m: float
+    strength: float = 0.0  # ridge/blob height over background, in robust standard deviations
+    cls: str = "unknown"
+    confidence: float = 0.0
+    features: dict[str, float] = field(default_factory=dict)
+
+    def length_m(self) -> float:
+        p = self.points_m
+        return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) if len(p) > 1 else 0.0
+
+    def to_json(self) -> dict:
+        return {"class": self.cls, "kind": self.kind,
+                "points_m": [[round(float(x), 5), round(float(y), 5)] for x, y in self.points_m],
+                "width_m": round(float(self.width_m), 4), "confidence": round(float(self.confidence), 3)}
+
+
+@dataclass(frozen=True)
+class RidgePoints:
+    """Sub-pixel ridge points: xy (n, 2) wall metres, direction (n, 2) unit along the ridge, strength (n,)
+    (smoothed height over background, robust σ), width (n,) metres (half-maximum width of the cross profile)."""
+
+    xy: NDArray[np.float64]
+    direction: NDArray[np.float64]
+    strength: NDArray[np.float64]
+    width: NDArray[np.float64]
+    pixel: NDArray[np.int64]  # (n, 2) (row, col) of the cell each point came from
+
+
+def background_level(values: NDArray[np.float64]) -> tuple[float, float]:
+    """(level, σ) of the empty-wall background among finite values, robust even when objects cover most of
+    the area: from the lower quantiles only (for Gaussian noise q25 − q05 = 0.971 σ, median = q25 + 0.674 σ).
+    Valid while at least a quarter of the cells are background."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return 0.0, 1.0
+    q05, q25, q99 = np.percentile(v, [5, 25, 99.9])
+    sigma = max((q25 - q05) / 0.971, 1e-9, 1e-3 * float(q99 - q05))
+    return float(q25 + 0.674 * sigma), float(sigma)
+
+
+def normalise(signal: NDArray[np.float64]) -> tuple[NDArray[np.float64], float, float]:
+    """(z-scores with NaN→0, background level, background σ) of a signal map with NaN unknown."""
+    known = np.isfinite(signal)
+    if not known.any():
+        return np.zeros(signal.shape), 0.0, 1.0
+    level, sigma = background_level(signal[known])
+    z = np.where(known, (signal - level) / sigma, 0.0)
+    return z, level, sigma
+
+
+def _smooth_derivatives(z: NDArray[np.float64], known: NDArray[np.bool_], sigma_px: float):
+    """Normalised-convolution Gaussian derivatives: unknown cells do not drag edges down."""
+    w = ndimage.gaussian_filter(known.astype(np.float64), sigma_px)
+    wsafe = np.maximum(w, 1e-6)
+    s = ndimage.gaussian_filter(z, sigma_px) / wsafe
+    s[w < 1e-3] = 0.0
+    # Derivatives by Gaussian derivative filters (unbiased at sub-cell level, unlike finite differences);
+    # the extra 1-cell blur is symmetric and does not move a ridge.
+    d = 1.0
+    gx = ndimage.gaussian_filter(s, d, order=(0, 1))
+    gy = ndimage.gaussian_filter(s, d, order=(1, 0))
+    gxx = ndimage.gaussian_filter(s, d, order=(0, 2))
+    gyy = ndimage.gaussian_filter(s, d, order=(2, 0))
+    gxy = ndimage.gaussian_filter(s, d, order=(1, 1))
+    return ndimage.gaussian_filter(s, d), gx, gy, gxx, gxy, gyy, w
+
+
+def ridge_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 0.006,
+                 min_strength: float = 6.0, polarity: float = 1.0) -> RidgePoints:
+    """Steger ridge points of a signal map (height, width), NaN unknown; polarity −1 finds valleys.
+
+    min_strength: smoothed height over the background in robust standard deviations.
+    """
+    z, _, _ = normalise(signal)
+    z = polarity * z
+    known = np.isfinite(signal)
+    sigma_px = sigma_m / info.resolution
+    s, gx, gy, hxx, hxy, hyy, w = _smooth_derivatives(z, known, sigma_px)
+    # Most negative eigenvalue of the Hessian and its eigenvector (the direction across the ridge)
+    tr_half = 0.5 * (hxx + hyy)
+    disc = np.sqrt(np.maximum(0.25 * (hxx - hyy) ** 2 + hxy**2, 0.0))
+    lam = tr_half - disc
+    # Eigenvector of lam: two algebraically equal forms; take the better conditioned one per cell
+    ax, ay = hxy, lam - hxx
+    bx, by = lam - hyy, hxy
+    use_b = np.hypot(bx, by) > np.hypot(ax, ay)
+    nx = np.where(use_b, bx, ax)
+    ny = np.where(use_b, by, ay)
+    lam_other = tr_half + disc
+    nn = np.hypot(nx, ny)
+    nn[nn == 0] = 1.0
+    nx, ny = nx / nn, ny / nn
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -(gx * nx + gy * ny) / lam
+    ox, oy = t * nx, t * ny
+    # A ridge curves strongly across and little along (line ends and blobs curve both ways)
+    # |offset| ≤ 0.6 rather than 0.5 cell: a ridge midway between two cells is taken by both (the Newton
+    # step is a few % off there) rather than by neither
+    cand = ((lam < 0) & (np.abs(lam_other) < 0.5 * np.abs(lam)) & (np.abs(ox) <= 0.6) & (np.abs(oy) <= 0.6)
+            & (s >= min_strength) & (w > 0.5) & np.isfinite(t))
+    rows, cols = np.nonzero(cand)
+    col_sub = cols + ox[rows, cols]
+    row_sub = rows + oy[rows, cols]
+    xy = info.to_wall(np.column_stack([col_sub, row_sub]))
+    direction = np.column_stack([-ny[rows, cols], nx[rows, cols]])
+    height = s[rows, cols]
+    # Half-maximum width of a Gaussian ridge from height and curvature: h/|λ| = σ_total² (in cells²)
+    sigma_total = np.sqrt(np.maximum(height / np.maximum(-lam[rows, cols], 1e-9), 0.0))
+    # the map's own footprint (Gaussian splat + bilinear split) widened the ridge too
+    grid_px2 = (tol.SIGNAL_SPLAT_SIGMA_M / info.resolution) ** 2 + 1.0 / 6.0
+    width = 2.3548 * np.sqrt(np.maximum(sigma_total**2 - sigma_px**2 - 1.0 - grid_px2, 0.0)) * info.resolution
+    return RidgePoints(xy, direction, height, width, np.column_stack([rows, cols]))
+
+
+def _chains(r: RidgePoints, max_turn_deg: float = 25.0,
+            subset: NDArray[np.int64] | None = None) -> list[NDArray[np.int64]]:
+    """Groups of ridge-point indices linked through 8-neighbouring cells with agreeing directions
+    (among `subset` of the points only, if given)."""
+    if subset is not None:
+        sub = RidgePoints(r.xy[subset], r.direction[subset], r.strength[subset], r.width[subset],
+                          r.pixel[subset])
+        return [subset[g] for g in _chains(sub, max_turn_deg)]
+    n = r.xy.shape[0]
+    if n == 0:
+        return []
+    rows, cols = r.pixel[:, 0], r.pixel[:, 1]
+    h, w = int(rows.max()) + 3, int(cols.max()) + 3
+    index = np.full((h, w + 2), -1, np.int64)  # one spare column on the left for negative offsets
+    index[rows, cols + 2] = np.arange(n)
+    cos_min = np.cos(np.radians(max_turn_deg))
+    src, dst = [], []
+    for dr, dc in ((0, 1), (1, -1), (1, 0), (1, 1), (0, 2), (2, 0), (2, 1), (1, 2), (2, -1), (1, -2)):
+        m = index[rows + dr, cols + dc + 2]
+        k = np.flatnonzero(m >= 0)
+        m = m[k]
+        agree = np.abs(np.einsum("ij,ij->i", r.direction[k], r.direction[m])) >= cos_min
+        src.append(k[agree])
+        dst.append(m[agree])
+    src, dst = np.concatenate(src), np.concatenate(dst)
+    g = coo_matrix((np.ones(len(src)), (src, dst)), shape=(n, n))
+    _, labels = connected_components(g, directed=False)
+    order = np.argsort(labels, kind="stable")
+    splits = np.flatnonzero(np.diff(labels[order])) + 1
+    return [grp for grp in np.split(order, splits)]
+
+
+def _order_along(points: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Indices ordering points (m, 2) along their chain: the longest path of their minimum spanning tree."""
+    return _main_path(points)[0]
+
+
+def _main_path(points: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """(order of all points along the chain's main path, mask of points off that path — a branch)."""
+    m = points.shape[0]
+    if m < 3:
+        return np.arange(m), np.zeros(m, bool)
+    # Spanning tree over a neighbourhood graph (k-d tree pairs within a few cells; sparse, O(m log m))
+    pairs = cKDTree(points).query_pairs(r=0.02, output_type="ndarray")
+    if pairs.shape[0] == 0:
+        return np.argsort(points[:, 0] + points[:, 1]), np.zeros(m, bool)
+    d = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1) + 1e-9
+    tree = minimum_spanning_tree(coo_matrix((d, (pairs[:, 0], pairs[:, 1])), shape=(m, m)))
+    sym = tree + tree.T
+    far = breadth_first_order(sym, 0, directed=False, return_predecessors=False)
+    end_a = int(far[-1])
+    order_b, pred = breadth_first_order(sym, end_a, directed=False, return_predecessors=True)
+    # Path from end_a to the farthest point along the tree (by hop count, adequate for chains)
+    end_b = int(order_b[-1])
+    path = [end_b]
+    while path[-1] != end_a:
+        path.append(int(pred[path[-1]]))
+    path = np.array(path[::-1])
+    # Points off the main path (branch stubs, other components) are attached by projection onto it
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points[path], axis=0), axis=1))])
+    off, nearest = cKDTree(points[path]).query(points)
+    return np.argsort(along[nearest], kind="stable"), off > BRANCH_OFFSET_M
+
+
+def _douglas_peucker(p: NDArray[np.float64], eps: float) -> list[int]:
+    """Indices of the vertices kept by Douglas–Peucker simplification of the ordered points p (m, 2)."""
+    keep = [0, p.shape[0] - 1]
+    stack = [(0, p.shape[0] - 1)]
+    while stack:
+        a, b = stack.pop()
+        if b <= a + 1:
+            continue
+        seg = p[b] - p[a]
+        length = np.linalg.norm(seg)
+        if length < 1e-12:
+            dist = np.linalg.norm(p[a + 1:b] - p[a], axis=1)
+        else:
+            u = seg / length
+            rel = p[a + 1:b] - p[a]
+            dist = np.abs(u[0] * rel[:, 1] - u[1] * rel[:, 0])
+        k = int(np.argmax(dist))
+        if dist[k] > eps:
+            mid = a + 1 + k
+            keep.append(mid)
+            stack.extend([(a, mid), (mid, b)])
+    return sorted(set(keep))
+
+
+def _fit_line(p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(centroid (2,), unit direction (2,)) of the total-least-squares line through p (m, 2)."""
+    c = p.mean(axis=0)
+    _, _, vt = np.linalg.svd(p - c, full_matrices=False)
+    return c, vt[0]
+
+
+def _intersect(c1, d1, c2, d2) -> NDArray[np.float64] | None:
+    A = np.column_stack([d1, -d2])
+    if abs(np.linalg.det(A)) < 1e-6:
+        return None
+    s, _ = np.linalg.solve(A, c2 - c1)
+    return c1 + s * d1
+
+
+def _drop_corner_cuts(lines: list) -> list:
+    """Remove short runs between two longer ones that meet near them: the blur rounds a bend into a short
+    diagonal, and the bend's vertex is where its neighbours intersect."""
+    changed = True
+    while changed and len(lines) >= 3:
+        changed = False
+        for k in range(1, len(lines) - 1):
+            (_c, _d), run = lines[k]
+            length = float(np.linalg.norm(run[-1] - run[0]))
+            if length >= 2.0 * tol.MIN_RUN_M:
+                continue
+            (c1, d1), _ = lines[k - 1]
+            (c2, d2), _ = lines[k + 1]
+            x = _intersect(c1, d1, c2, d2)
+            if x is not None and np.linalg.norm(x - run.mean(axis=0)) < length:
+                del lines[k]
+                changed = True
+                break
+    return lines
+
+
+def _polyline_from_chain(xy: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+    """Ordered chain points → one or more refined polylines (split where the chain has a gap)."""
+    out = []
+    gaps = np.flatnonzero(np.linalg.norm(np.diff(xy, axis=0), axis=1) > tol.LINE_GAP_M) + 1
+    for piece in np.split(xy, gaps):
+        if piece.shape[0] < tol.RIDGE_MIN_POINTS:
+            continue
+        keep = _douglas_peucker(piece, 2.5 * tol.LINE_INLIER_M)
+        # Least-squares line per straight run; drop the ends of runs (bend regions are biased)
+        lines = []
+        for a, b in itertools.pairwise(keep):
+            run = piece[a:b + 1]
+            # Short runs are the hooks a ridge detector draws where a line ends or crosses another
+            if run.shape[0] >= 4 and np.linalg.norm(run[-1] - run[0]) >= tol.MIN_RUN_M:
+                lines.append((_fit_line(run), run))
+        if not lines:
+            continue
+        lines = _drop_corner_cuts(lines)
+        verts = []
+        (c0, d0), run0 = lines[0]
+        verts.append(c0 + d0 * ((run0[0] - c0) @ d0))
+        for ((c1, d1), _), ((c2, d2), _) in itertools.pairwise(lines):
+            x = _intersect(c1, d1, c2, d2)
+            if x is not None:
+                verts.append(x)
+        (cl, dl), runl = lines[-1]
+        verts.append(cl + dl * ((runl[-1] - cl) @ dl))
+        poly = np.array(verts)
+        if np.linalg.norm(np.diff(poly, axis=0), axis=1).sum() >= tol.LINE_MIN_LENGTH_M:
+            out.append(poly)
+    return out
+
+
+def _join(polys: list[NDArray[np.float64]], widths: list[float],
+          strengths: list[float]) -> tuple[list[NDArray[np.float64]], list[float], list[float]]:
+    """Join polylines whose ends meet: first collinear ends (a ridge interrupted where another crosses it),
+    then angled ends into bends, except at a crossing (where another polyline passes the joint)."""
+    polys = [p.copy() for p in polys]
+    for allow_bend in (False, True):
+        changed = True
+        while changed:
+            changed = False
+            for a in range(len(polys)):
+                for b in range(a + 1, len(polys)):
+                    others = [p for k, p in enumerate(polys) if k not in (a, b)]
+                    joined = _try_join(polys[a], polys[b], allow_bend, others)
+                    if joined is None:
+                        continue
+                    la, lb = _length(polys[a]), _length(polys[b])
+                    polys[a] = joined
+                    widths[a] = (widths[a] * la + widths[b] * lb) / max(la + lb, 1e-12)
+                    strengths[a] = (strengths[a] * la + strengths[b] * lb) / max(la + lb, 1e-12)
+                    del polys[b], widths[b], strengths[b]
+                    changed = True
+                    break
+                if changed:
+                    break
+    return polys, widths, strengths
+
+
+def _distance_to_polyline(x: NDArray[np.float64], poly: NDArray[np.float64]) -> float:
+    """Distance (metres) of one point (2,) to a polyline (k, 2)."""
+    return float(distances_to_polyline(np.asarray(x, dtype=np.float64).reshape(1, 2), poly)[0])
+
+
+def distances_to_polyline(x: NDArray[np.float64], poly: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Distances (n,) of points (n, 2) to a polyline (k, 2), metres."""
+    if poly.shape[0] == 1:
+        return np.linalg.norm(x - poly[0], axis=1)
+    a, b = poly[:-1], poly[1:]
+    d = b - a
+    t = np.einsum("nkj,kj->nk", x[:, None, :] - a[None], d) / np.maximum(np.einsum("kj,kj->k", d, d), 1e-18)
+    t = np.clip(t, 0.0, 1.0)
+    foot = a[None] + t[..., None] * d[None]
+    return np.min(np.linalg.norm(foot - x[:, None, :], axis=2), axis=1)
+
+
+def _length(p: NDArray[np.float64]) -> float:
+    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+
+def _try_join(p: NDArray[np.float64], q: NDArray[np.float64], allow_bend: bool,
+              others: list[NDArray[np.float64]]) -> NDArray[np.float64] | None:
+    best = None
+    for pe in (0, -1):
+        for qe in (0, -1):
+            gap = float(np.linalg.norm(p[pe] - q[qe]))
+            if best is None or gap < best[0]:
+                best = (gap, pe, qe)
+    gap, pe, qe = best  # type: ignore[misc]
+    if gap > tol.JOIN_ENDPOINT_M:
+        # A longer gap is bridged only where other lines cross it (their ridges interrupt this one) and
+        # both pieces lie on one straight line
+        if allow_bend or gap > tol.BRIDGE_GAP_M or not others:
+            return None
+        a, b = p[pe], q[qe]
+        da = p[pe] - p[1 if pe == 0 else -2]
+        db = q[1 if qe == 0 else -2] - q[qe]
+        u = (b - a) / gap
+        if min(float(da @ u) / np.linalg.norm(da), float(db @ u) / np.linalg.norm(db)) < np.cos(
+                np.radians(tol.BRIDGE_MAX_ANGLE_DEG)):
+            return None
+        probe = a + np.linspace(0.1, 0.9, 9)[:, None] * (b - a)
+        if not any(distances_to_polyline(probe, o).min() < tol.BRIDGE_CROSSING_M for o in others):
+            return None
+        pp = p if pe == -1 else p[::-1]
+        qq = q if qe == 0 else q[::-1]
+        return np.vstack([pp, qq])
+    pp = p if pe == -1 else p[::-1]  # pp ends at the joint
+    qq = q if qe == 0 else q[::-1]  # qq starts at the joint
+    dp = pp[-1] - pp[-2]
+    dq = qq[1] - qq[0]
+    dp /= np.linalg.norm(dp)
+    dq /= np.linalg.norm(dq)
+    angle = np.degrees(np.arccos(np.clip(dp @ dq, -1.0, 1.0)))
+    if angle < tol.JOIN_MIN_ANGLE_DEG:
+        # Collinear: both must also lie on one line (not two parallel pipes side by side)
+        rel = qq[0] - pp[-1]
+        off = abs(float(dp[0] * rel[1] - dp[1] * rel[0]))
+        if off > 2.0 * tol.LINE_INLIER_M:
+            return None
+        return np.vstack([pp[:-1], 0.5 * (pp[-1] + qq[0]), qq[1:]]) if len(pp) > 1 and len(qq) > 1 else None
+    if not allow_bend:
+        return None
+    x = _intersect(pp[-2], dp, qq[0], dq)
+    if x is not None and any(_distance_to_polyline(x, o) < tol.JOIN_ENDPOINT_M for o in others):
+        return None  # a crossing, not a bend
+    if x is None or np.linalg.norm(x - pp[-1]) > tol.JOIN_ENDPOINT_M or np.linalg.norm(x - qq[0]) > \
+            tol.JOIN_ENDPOINT_M:
+        return None
+    return np.vstack([pp[:-1], x, qq[1:]])
+
+
+def extract_lines(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 0.006,
+                  min_strength: float = 6.0) -> list[MapObject]:
+    """Pipes/cables (any straight, bent or diagonal run) in one signal map as 'line' MapObjects."""
+    r = ridge_points(signal, info, sigma_m, min_strength)
+    polys, widths, strengths = [], [], []
+    todo = [g for g in _chains(r) if g.size >= tol.RIDGE_MIN_POINTS]
+    rounds = 0
+    while todo and rounds < 200:
+        rounds += 1
+        grp = todo.pop()
+        order, branch = _main_path(r.xy[grp])
+        # A chain with a branch (a line ending on another: a T) is its main path, and the branch again
+        if branch.any():
+            rest = grp[branch]
+            if rest.size >= tol.RIDGE_MIN_POINTS:
+                todo += [g for g in _chains(r, subset=rest) if g.size >= tol.RIDGE_MIN_POINTS]
+            keep = ~branch
+            grp, order = grp[keep], np.argsort(np.argsort(order)[keep], kind="stable")
+        idx = grp[order]
+        for poly in _polyline_from_chain(r.xy[idx]):
+            polys.append(poly)
+            widths.append(float(np.median(r.width[idx])))
+            strengths.append(float(np.median(r.strength[idx])))
+    polys, widths, strengths = _join(polys, widths, strengths)
+    polys = [p[_douglas_peucker(p, tol.LINE_INLIER_M)] for p in polys]  # drop vertices left by merges
+    return [MapObject("line", p, w, s) for p, w, s in zip(polys, widths, strengths, strict=True)]
+
+
+def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 0.004,
+                   min_strength: float = 6.0, max_elongation: float = 2.0,
+                   max_width_m: float = 0.12) -> list[MapObject]:
+    """Small round peaks (screws, nails) as 'point' MapObjects with sub-cell positions."""
+    z, _, _ = normalise(signal)
+    known = np.isfinite(signal)
+    sigma_px = sigma_m / info.resolution
+    s, gx, gy, hxx, hxy, hyy, w = _smooth_derivatives(z, known, sigma_px)
+    peak = (s == ndimage.maximum_filter(s, size=5)) & (s >= min_strength) & (w > 0.5)
+    tr_half = 0.5 * (hxx + hyy)
+    disc = np.sqrt(np.maximum(0.25 * (hxx - hyy) ** 2 + hxy**2, 0.0))
+    lam1, lam2 = tr_half - disc, tr_half + disc  # lam1 ≤ lam2
+    round_ = (lam2 < 0) & (lam1 / np.minimum(lam2, -1e-12) <= max_elongation**2)
+    out = []
+    for rr, cc in zip(*np.nonzero(peak & round_), strict=True):
+        H = np.array([[hxx[rr, cc], hxy[rr, cc]], [hxy[rr, cc], hyy[rr, cc]]])
+        g = np.array([gx[rr, cc], gy[rr, cc]])
+        try:
+            off = -np.linalg.solve(H, g)
+        except np.linalg.LinAlgError:
+            continue
+        if np.any(np.abs(off) > 1.0):
+            continue
+        xy = info.to_wall(np.array([[cc + off[0], rr + off[1]]]))
+        sig_tot = np.sqrt(max(s[rr, cc] / max(-lam2[rr, cc], 1e-9), 0.0))
+        width = 2.3548 * np.sqrt(max(sig_tot**2 - sigma_px**2 - 1.0, 0.0)) * info.resolution
+        if width > max_width_m:
+            continue  # a round blob this wide is a plate or a box, not a screw (extract_regions finds it)
+        out.append(MapObject("point", xy, width, float(s[rr, cc])))
+    return out
+
+
+def extract_regions(signal: NDArray[np.float64], info: GridInfo, polarity: float, min_strength: float = 4.0,
+                    min_area_m2: float = 0.004, min_width_m: float = 0.03, sigma_m: float = 0.006,
+                    exclude: NDArray[np.bool_] | None = None) -> list[MapObject]:
+    """Wide regions (studs, plates: polarity +1; cavities: −1) as 'outline' MapObjects (closed rings).
+
+    Regions narrower than min_width_m are removed by a morphological opening (lines are not areas);
+    exclude (height, width) masks cells already explained (e.g. around detected pipes and cables).
+    """
+    import cv2
+
+    z, _, _ = normalise(signal)
+    known = np.isfinite(signal)
+    s, *_rest, w = _smooth_derivatives(polarity * z, known, sigma_m / info.resolution)
+    mask = (s >= min_strength) & (w > 0.5)
+    if exclude is not None:
+        mask &= ~exclude
+    # The outline is the half-maximum contour of each blob (the object's edge under a symmetric footprint)
+    labels, n = ndimage.label(mask)
+    if n:
+        peaks = ndimage.maximum(s, labels, index=np.arange(1, n + 1))
+        mask &= s >= 0.5 * np.concatenate([[np.inf], peaks])[labels]
+    radius = max(1, round(0.5 * min_width_m / info.resolution))
+    yy, xx = np.mgrid[-radius:radius + 1, -radius:radius + 1]
+    disk = xx**2 + yy**2 <= radius**2
+    mask = ndimage.binary_opening(mask, structure=disk)
+    labels, n = ndimage.label(mask)
+    out = []
+    for k in range(1, n + 1):
+        region = labels == k
+        area = float(region.sum()) * info.resolution**2
+        if area < min_area_m2:
+            continue
+        contours, _ = cv2.findContours(region.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        contour = max(contours, key=cv2.contourArea).reshape(-1, 2).astype(np.float32)
+        rect = cv2.minAreaRect(contour)
+        box = cv2.boxPoints(rect).astype(np.float64)  # (4, 2) col,row
+        ring = info.to_wall(np.vstack([box, box[:1]]))
+        width = min(rect[1]) * info.resolution
+        obj = MapObject("outline", ring, float(width), float(np.median(s[region])))
+        obj.features["area_m2"] = area
+        obj.features["polarity"] = float(polarity)
+        out.append(obj)
+    return out
+
+
+def near_lines(lines: list[MapObject], info: GridInfo, clearance_m: float) -> NDArray[np.bool_]:
+    """(height, width) mask of cells within clearance_m of any line object."""
+    import cv2
+
+    canvas = np.zeros(info.shape, np.uint8)
+    for ln in lines:
+        pix = np.rint(info.to_pixel(ln.points_m) * 4).astype(np.int32)
+        thick = max(1, round(2 * clearance_m / info.resolution))
+        cv2.polylines(canvas, [pix], False, 1, thick, cv2.LINE_8, shift=2)
+    return canvas.astype(bool)
+
+
+def drop_points_on_lines(points: list[MapObject], lines: list[MapObject],
+                         clearance_m: float = tol.JOIN_ENDPOINT_M * 0.5) -> list[MapObject]:
+    """Point peaks that lie on a line (where lines cross, or along a pipe) are that line, not fasteners."""
+    return [p for p in points
+            if all(_distance_to_polyline(p.points_m[0], ln.points_m) > max(clearance_m, ln.width_m)
+                   for ln in lines if ln.points_m.shape[0] >= 2)]

@@ -1,0 +1,349 @@
+"""Scan log → stitched frame poses → occupancy/signal grid → classified objects (what `arproj map` runs).
+
+Reads the SQLite scan log written by scanner.log (format arproj-scanlog/1). Bad parts of a log are skipped
+with a warning and the map is built from what is sound: passes that cannot be read (a truncated file), samples
+without a position, NaN readings (that sensor only); cells no sample reached stay *unknown*.
+"""
+
+from __future__ import annotations
+
+import itertools
+import sqlite3
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from geometry.errors import InputError
+from mapping import tolerances as tol
+from mapping.fusion import Fuser, FusionParams, InductiveModel
+from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid
+from mapping.objects import (
+    MapObject,
+    drop_points_on_lines,
+    extract_lines,
+    extract_points,
+    extract_regions,
+    near_lines,
+)
+from mapping.stitching import FrameGraph
+from scanner.log import ScanLog
+
+STITCH_ROUNDS = 2  # feature pairing + alignment rounds (the second re-pairs and re-linearises)
+SPARSE_COVERAGE = 0.6  # below this fraction of the wall's cells observed, lines come from the passes' peaks
+
+
+@dataclass
+class ScanData:
+    """What a log holds, as arrays. samples: dict of (n,) arrays (scanner.log columns); frames likewise."""
+
+    source: str
+    samples: dict[str, NDArray]
+    frames: dict[str, NDArray]
+    meta: dict[str, Any]
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.samples["time_s"].shape[0]) if "time_s" in self.samples else 0
+
+
+def load_scan(path: str | Path) -> ScanData:
+    """Read a scan log; unreadable passes are skipped with a warning (a truncated or damaged file)."""
+    path = Path(path)
+    warnings: list[str] = []
+    try:
+        log = ScanLog.open(path)
+    except sqlite3.DatabaseError as err:
+        raise InputError(f"{path}: cannot read the scan log ({err})", "is it a scan log from `arproj scan`?") \
+            from None
+    with log:
+        try:
+            frames = log.frames()
+        except (sqlite3.DatabaseError, ValueError) as err:
+            warnings.append(f"{path}: frames table unreadable ({err}); using sample positions as logged")
+            frames = {}
+        try:
+            samples = log.samples()
+        except sqlite3.DatabaseError as err:
+            warnings.append(f"{path}: damaged samples table ({err}); reading pass by pass")
+            samples = _samples_pass_by_pass(log, warnings)
+        meta = dict(log.meta)
+    data = ScanData(str(path), samples, frames, meta, warnings)
+    if data.n_samples == 0:
+        raise InputError(f"{path}: the scan log has no samples",
+                         "the scan stopped before its first pass; resume it with `arproj scan --resume LOG`")
+    if meta.get("status") != "complete":
+        warnings.append(f"{path}: the scan is not complete (status {meta.get('status')!r}); the map covers "
+                        "what was scanned, the rest is marked unknown")
+    return data
+
+
+def _samples_pass_by_pass(log: ScanLog, warnings: list[str]) -> dict[str, NDArray]:
+    try:
+        pass_ids = [int(p) for p in log.passes()["pass_id"]]
+    except sqlite3.DatabaseError as err:
+        raise InputError(f"{log.path}: the scan log is damaged beyond reading ({err})") from None
+    parts, bad = [], 0
+    for pid in pass_ids:
+        try:
+            parts.append(log.samples([pid]))
+        except sqlite3.DatabaseError:
+            bad += 1
+    if bad:
+        warnings.append(f"{log.path}: {bad} of {len(pass_ids)} passes unreadable and skipped")
+    if not parts:
+        return {}
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+@dataclass
+class MapResult:
+    grid: WallGrid
+    objects: list[MapObject]
+    bounds: tuple[float, float, float, float]  # x_min, y_min, x_max, y_max of the wall, metres
+    poses: NDArray[np.float64] | None  # (n_frames, 3) stitched frame poses, or None
+    frame_ids: NDArray[np.int64] | None
+    warnings: list[str]
+    sample_xy: NDArray[np.float64]  # (n, 2) positions the map used, metres
+    truth_xy: NDArray[np.float64] | None = None  # (n, 2) simulation truth, if logged
+    notes: list[str] = field(default_factory=list)  # what was done (not problems)
+
+
+@dataclass(frozen=True)
+class MapSettings:
+    resolution_m: float = tol.DEFAULT_RESOLUTION_M
+    stitch: bool = True
+    line_min_strength: float = 6.0
+    point_min_strength: float = 8.0
+    fusion: FusionParams = field(default_factory=FusionParams)
+
+
+def sample_positions(data: ScanData, poses: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+    """Wall positions (n, 2) of the samples: as logged, or re-derived from drive positions and frame poses."""
+    s = data.samples
+    xy = np.column_stack([s["x_m"], s["y_m"]])
+    if poses is None or not data.frames:
+        return xy
+    ids = data.frames["frame_id"]
+    lookup = {int(f): k for k, f in enumerate(ids)}
+    k = np.array([lookup.get(int(f), -1) for f in s["frame_id"]])
+    ok = k >= 0
+    out = xy.copy()
+    uv = np.column_stack([s["drive_u_m"], s["drive_v_m"]])
+    pose = poses[k[ok]]
+    c, sn = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    out[ok, 0] = pose[:, 0] + c * uv[ok, 0] - sn * uv[ok, 1]
+    out[ok, 1] = pose[:, 1] + sn * uv[ok, 0] + c * uv[ok, 1]
+    return out
+
+
+def hysteresis_corrected(xy: NDArray[np.float64], data: ScanData, shift_m: float) -> NDArray[np.float64]:
+    """Inductive sample positions moved back against the direction of motion by the sensor's lag."""
+    if shift_m == 0.0:
+        return xy
+    s = data.samples
+    out = xy.copy()
+    d = s["direction"].astype(np.float64)
+    along_x = s["axis"] == 0
+    out[along_x, 0] -= d[along_x] * shift_m
+    out[~along_x, 1] -= d[~along_x] * shift_m
+    return out
+
+
+def wall_bounds(data: ScanData, xy: NDArray[np.float64]) -> tuple[float, float, float, float]:
+    w, h = data.meta.get("wall_width_m"), data.meta.get("wall_height_m")
+    if isinstance(w, (int, float)) and isinstance(h, (int, float)) and w > 0 and h > 0:
+        return (0.0, 0.0, float(w), float(h))
+    ok = np.all(np.isfinite(xy), axis=1)
+    lo, hi = xy[ok].min(axis=0), xy[ok].max(axis=0)
+    return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
+
+def stitch_frames(data: ScanData) -> tuple[NDArray[np.float64] | None, list[str]]:
+    """Frame poses aligned from their localization priors (and, where frames overlap, shared in-wall
+    features); None if the log has no frames. See mapping.stitching."""
+    from mapping.frame_features import feature_constraints, frames_features
+
+    f = data.frames
+    if not f or f["frame_id"].size == 0:
+        return None, ["log has no frames; using logged sample positions"]
+    est = np.column_stack([f["est_x_m"], f["est_y_m"], f["est_phi_rad"]])
+    cov = f["cov"].copy()
+    notes = []
+    bad = ~(np.all(np.isfinite(est), axis=1) & np.all(np.isfinite(cov.reshape(-1, 9)), axis=1))
+    if bad.any():
+        notes.append(f"{int(bad.sum())} frame(s) without a sound localization; their samples keep the logged "
+                     "positions")
+        est[bad] = 0.0
+        cov[bad] = np.diag([1e2, 1e2, 1e2])  # effectively free; constrained only by features if any
+    eig = np.linalg.eigvalsh(cov)
+    cov[eig.min(axis=1) <= 0] += np.diag([1e-8, 1e-8, 1e-10])
+    features = frames_features(data)
+    poses, n_feat, dropped = est.copy(), 0, 0
+    for round_ in range(STITCH_ROUNDS):
+        # Round 1 pairs features by the localization; later rounds re-pair them by the aligned poses and
+        # re-linearise the rotations about those (Gauss–Newton)
+        graph = FrameGraph(poses.copy())
+        graph.add_priors(est, cov)
+        sigma = None if round_ == 0 else np.tile([0.003, 0.003, 0.002], (len(est), 1))
+        n_feat = feature_constraints(data, graph, poses, features, sigma)
+        if n_feat == 0:
+            break
+        poses, dropped = graph.solve_robust(feature_blocks_from=1)
+    poses[bad] = np.nan
+    if n_feat:
+        notes.append(f"stitched {len(est)} frames with {n_feat - dropped} shared in-wall feature(s)"
+                     + (f" ({dropped} inconsistent pairing(s) dropped)" if dropped else ""))
+    return poses, notes
+
+
+def build_map(data: ScanData, settings: MapSettings | None = None) -> MapResult:
+    """The whole mapping chain on one scan."""
+    settings = settings or MapSettings()
+    warnings = list(data.warnings)
+    poses, frame_ids, notes = None, None, []
+    if settings.stitch and data.frames:
+        poses, stitch_notes = stitch_frames(data)
+        warnings += [n for n in stitch_notes if not n.startswith("stitched")]
+        notes += [n for n in stitch_notes if n.startswith("stitched")]
+        frame_ids = data.frames["frame_id"]
+    xy = sample_positions(data, poses)
+    if poses is not None:
+        logged = np.column_stack([data.samples["x_m"], data.samples["y_m"]])
+        missing = ~np.all(np.isfinite(xy), axis=1)
+        xy[missing] = logged[missing]
+    unplaced = ~np.all(np.isfinite(xy), axis=1)
+    if unplaced.all():
+        raise InputError(f"{data.source}: no sample has a position on the wall", "check the log's x_m/y_m")
+    if unplaced.any():
+        warnings.append(f"{int(unplaced.sum())} sample(s) without a position skipped")
+    bounds = wall_bounds(data, xy)
+    margin = 0.0
+    info = GridInfo.covering(bounds[0] - margin, bounds[1] - margin, bounds[2] + margin, bounds[3] + margin,
+                             settings.resolution_m)
+    readings = {s: data.samples[s] for s in SENSORS if s in data.samples}
+    models: dict[str, SensorModel] = {}
+    for s, v in readings.items():
+        nan = int((~np.isfinite(v)).sum())
+        if nan:
+            warnings.append(f"{nan} NaN {s} reading(s) skipped")
+        if np.isfinite(v).any():
+            models[s] = SensorModel.from_readings(s, v)
+    if not models:
+        raise InputError(f"{data.source}: every reading is NaN; nothing to map")
+    grid = WallGrid(info, models)
+    shift = float((data.meta.get("sensor") or {}).get("hysteresis_m", 0.0) or 0.0)
+    for s in models:
+        pos = hysteresis_corrected(xy, data, shift) if s == "inductive" else xy
+        grid.add_samples(pos, {s: readings[s]})
+    coverage = float(np.mean(grid.known(next(iter(models)))))
+    sparse = coverage < SPARSE_COVERAGE
+    objects = extract_objects(grid, settings, data.meta.get("sensor"), data if sparse else None, xy, shift)
+    if sparse:
+        notes.append(f"sparse scan ({coverage:.0%} of the wall covered): lines linked from the passes' peaks")
+    truth = None
+    if "true_x_m" in data.samples and np.isfinite(data.samples["true_x_m"]).any():
+        truth = np.column_stack([data.samples["true_x_m"], data.samples["true_y_m"]])
+    return MapResult(grid, objects, bounds, poses, frame_ids, warnings, xy, truth, notes)
+
+
+def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_meta: dict | None = None,
+                    sparse_data: ScanData | None = None, xy: NDArray[np.float64] | None = None,
+                    lag_m: float = 0.0) -> list[MapObject]:
+    """Lines from the inductive and AC maps (merged where they coincide) — or, for a sparse scan
+    (sparse_data given), from the passes' peaks — then fasteners, studs and cavities, all classified."""
+    from mapping.sparse import lines_from_passes
+
+    settings = settings or MapSettings()
+    model = InductiveModel.from_meta(sensor_meta)
+    fuser = Fuser(grid, settings.fusion, model)
+    lines: list[MapObject] = []
+    if sparse_data is not None and xy is not None:
+        lines = lines_from_passes(sparse_data.samples, xy, lag_m, model, settings.fusion)
+    elif "ac" in grid.models:
+        # Live cables: sharp AC crests (their best-located view). Broad AC ridges are metal coupled to a
+        # cable; the inductive map shows that metal better.
+        for obj in extract_lines(grid.signal("ac"), grid.info, sigma_m=0.004, min_strength=settings.line_min_strength):
+            fuser.classify(obj)
+            if obj.cls == "power_line" and obj.features.get("ac_sharpness", 0.0) >= settings.fusion.ac_sharpness:
+                lines.append(obj)
+    if "inductive" in grid.models and sparse_data is None:
+        found = extract_lines(grid.signal("inductive"), grid.info, min_strength=settings.line_min_strength)
+        crests = list(lines)
+        for obj in found:
+            lines += _without_duplicate_parts(obj, crests)
+    points: list[MapObject] = []
+    if "inductive" in grid.models:
+        points = extract_points(grid.signal("inductive"), grid.info, min_strength=settings.point_min_strength)
+        points = drop_points_on_lines(points, lines)
+    regions: list[MapObject] = []
+    explained = np.zeros(grid.info.shape, bool)
+    for ln in lines:
+        explained |= near_lines([ln], grid.info, max(0.04, 1.5 * ln.width_m))
+    if points:
+        explained |= near_lines([MapObject("line", np.repeat(p.points_m, 2, axis=0), 0.0) for p in points],
+                                grid.info, 0.04)
+    if "inductive" in grid.models:  # metal areas: plates, steel studs
+        regions += extract_regions(grid.signal("inductive"), grid.info, +1.0, min_strength=10.0,
+                                   min_width_m=0.04, min_area_m2=0.003, exclude=explained)
+    if "capacitive" in grid.models:  # wood (raised) and cavities (lowered)
+        cap = grid.signal("capacitive")
+        metal = near_lines(regions, grid.info, 0.02) if regions else np.zeros(grid.info.shape, bool)
+        regions += extract_regions(cap, grid.info, +1.0, min_strength=8.0, min_area_m2=0.006,
+                                   exclude=explained | metal)
+        regions += extract_regions(cap, grid.info, -1.0, min_strength=8.0, min_area_m2=0.006, exclude=explained)
+    if sparse_data is not None:
+        regions = []  # the grid is too patchy for areas; the passes' lines are classified already
+        objects = lines + [fuser.classify(o) for o in points]
+    else:
+        objects = [fuser.classify(o) for o in lines + points + regions]
+    return [_as_outline(o) if o.kind == "line" and o.cls == "metal" and len(o.points_m) == 2 else o
+            for o in objects]
+
+
+def _as_outline(obj: MapObject) -> MapObject:
+    """A straight ridge of sheet metal (a steel stud, a plate) as the rectangle it covers."""
+    a, b = obj.points_m
+    d = (b - a) / max(float(np.linalg.norm(b - a)), 1e-12)
+    n = np.array([-d[1], d[0]]) * 0.5 * obj.width_m
+    ring = np.array([a + n, b + n, b - n, a - n, a + n])
+    return MapObject("outline", ring, obj.width_m, obj.strength, obj.cls, obj.confidence, obj.features)
+
+
+def _without_duplicate_parts(obj: MapObject, kept: list[MapObject], radius_m: float = 0.015) -> list[MapObject]:
+    """obj minus the segments that lie along lines already kept (a cable seen by both the AC and the
+    inductive sensor); what remains, split where segments were removed. A segment is a duplicate when 70 %
+    of it lies within radius_m of a kept line."""
+    from mapping.fusion import _densify
+    from mapping.objects import distances_to_polyline
+
+    if not kept:
+        return [obj]
+    p = obj.points_m
+    dup = []
+    for a, b in itertools.pairwise(p):
+        pts, _ = _densify(np.array([a, b]), 0.01)
+        d = np.min([distances_to_polyline(pts, k.points_m) for k in kept], axis=0)
+        dup.append(bool((d < radius_m).mean() > 0.7))
+    if not any(dup):
+        return [obj]
+    out, run = [], [p[0]]
+    for k, is_dup in enumerate(dup):
+        if is_dup:
+            if len(run) >= 2:
+                out.append(np.array(run))
+            run = [p[k + 1]]
+        else:
+            run.append(p[k + 1])
+    if len(run) >= 2:
+        out.append(np.array(run))
+    pieces = []
+    for poly in out:
+        if np.linalg.norm(np.diff(poly, axis=0), axis=1).sum() >= tol.LINE_MIN_LENGTH_M:
+            pieces.append(MapObject("line", poly, obj.width_m, obj.strength, features=dict(obj.features)))
+    return pieces
+
+

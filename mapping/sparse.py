@@ -1,0 +1,229 @@
+"""Lines from sparse scans (adaptive plans): 1-D peaks per pass, linked into lines by sequential RANSAC.
+
+A dense raster fills the grid and mapping.objects finds ridges in it; an adaptive plan (coarse passes 25 cm
+apart, then short passes to confirm and trace) leaves most of the wall unknown, so there the lines are built
+from the passes themselves: every pass's inductive and AC peaks (scanner.peaks: half-maximum midpoints, the
+inductive lag undone) are points where a line crosses the pass; collinear points from several passes are one
+straight run (RANSAC, then least squares on the inliers), runs are split at gaps and joined at bends like the
+dense ridges. Classification uses each line's peaks: a narrow AC crest is a live cable; the inductive height
+against the height a pipe would give at the depth its width implies separates cables, pipes and sheet metal.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mapping import tolerances as tol
+from mapping.fusion import FusionParams, InductiveModel, _raw, _sigmoid
+from mapping.objects import MapObject, _join, distances_to_polyline
+from scanner.peaks import PeakConfig, detect_peaks
+
+RANSAC_INLIER_M = 0.004  # a peak this close to a line belongs to it
+RANSAC_PAIRS = 400
+MIN_PEAKS_PER_LINE = 3
+MAX_GAP_M = 0.40  # peaks of one run are at most this far apart along the line (coarse passes: 25 cm)
+AC_CREST_MAX_WIDTH_M = 0.03  # an AC peak narrower than this (FWHM) is a live cable's crest
+
+
+@dataclass
+class PassPeaks:
+    """Peaks of all passes of one channel: xy (n, 2) wall metres, height (n,) display units over the pass's
+    baseline, width (n,) FWHM metres, axis (n,) 0 = along x, pass_id (n,)."""
+
+    xy: NDArray[np.float64]
+    height: NDArray[np.float64]
+    width: NDArray[np.float64]
+    axis: NDArray[np.int64]
+    pass_id: NDArray[np.int64]
+    baseline: float
+
+
+def pass_peaks(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: str, lag_m: float = 0.0,
+               min_height: float = 0.04) -> PassPeaks:
+    """Peaks of `channel` along every pass; the along-pass coordinate is shifted back by lag_m (hysteresis)."""
+    pids = samples["pass_id"]
+    order = np.argsort(pids, kind="stable")
+    pid_sorted = pids[order]
+    starts = np.flatnonzero(np.r_[True, pid_sorted[1:] != pid_sorted[:-1]])
+    ends = np.r_[starts[1:], len(order)]
+    cfg = PeakConfig(min_height=min_height, min_prominence=0.75 * min_height, min_distance_m=0.015)
+    out: dict[str, list] = {"xy": [], "height": [], "width": [], "axis": [], "pass_id": []}
+    values = samples[channel]
+    finite = values[np.isfinite(values)]
+    # one background for the whole scan: a short trace pass's own 20th percentile sits on the peak's tails
+    # and would shrink both the height and the width
+    global_base = float(np.percentile(finite, 20)) if finite.size else 0.0
+    base_levels = []
+    for a, b in zip(starts, ends, strict=True):
+        idx = order[a:b]
+        p = xy[idx]
+        v = values[idx]
+        ok = np.all(np.isfinite(p), axis=1) & np.isfinite(v)
+        if ok.sum() < 10:
+            continue
+        p, v = p[ok], v[ok]
+        axis = int(samples["axis"][idx[0]])
+        direction = float(samples["direction"][idx[0]])
+        along = p[:, axis] - direction * lag_m
+        base_levels.append(float(np.percentile(v, 20)))
+        srt = np.argsort(along)
+        along, p, v = along[srt], p[srt], v[srt]
+        for pk in detect_peaks(along, v, cfg):
+            height, width = _height_width(along, v, pk.position, global_base)
+            if not np.isfinite(width):
+                continue  # the half-maximum lies beyond the pass's end: the centre is not trustworthy
+            other = float(np.interp(pk.position, along, p[:, 1 - axis]))
+            point = np.empty(2)
+            point[axis] = pk.position
+            point[1 - axis] = other
+            out["xy"].append(point)
+            out["height"].append(height)
+            out["width"].append(width)
+            out["axis"].append(axis)
+            out["pass_id"].append(int(samples["pass_id"][idx[0]]))
+    base = global_base
+    return PassPeaks(np.array(out["xy"]).reshape(-1, 2), np.array(out["height"], dtype=np.float64),
+                     np.array(out["width"], dtype=np.float64), np.array(out["axis"], dtype=np.int64),
+                     np.array(out["pass_id"], dtype=np.int64), base)
+
+
+def _height_width(along: NDArray[np.float64], v: NDArray[np.float64], position: float,
+                  base: float) -> tuple[float, float]:
+    """(height over base, full width at half maximum) of the peak at `position` of the sorted profile."""
+    k = int(np.clip(np.searchsorted(along, position), 0, len(along) - 1))
+    lo, hi = max(0, k - 3), min(len(v), k + 4)
+    top = float(np.median(np.sort(v[lo:hi])[-3:]))  # robust to one noisy sample
+    half = base + 0.5 * (top - base)
+    left = k
+    while left > 0 and v[left] > half:
+        left -= 1
+    right = k
+    while right < len(v) - 1 and v[right] > half:
+        right += 1
+    if v[left] > half or v[right] > half:
+        return top - base, float("nan")
+
+    def cross(i: int, j: int) -> float:
+        return float(along[i] + (half - v[i]) * (along[j] - along[i]) / (v[j] - v[i])) if v[j] != v[i] \
+            else float(along[i])
+
+    return top - base, cross(right - 1, right) - cross(left, left + 1)
+
+
+def _fit(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    c = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - c, full_matrices=False)
+    return c, vt[0]
+
+
+def ransac_lines(peaks: PassPeaks, seed: int = 0) -> list[tuple[NDArray[np.float64], NDArray[np.int64]]]:
+    """Straight runs through the peaks: [(endpoints (2, 2), indices of their peaks)], strongest first."""
+    rng = np.random.default_rng(seed)
+    remaining = np.arange(peaks.xy.shape[0])
+    runs = []
+    while remaining.size >= MIN_PEAKS_PER_LINE:
+        p = peaks.xy[remaining]
+        a = rng.integers(0, p.shape[0], RANSAC_PAIRS)
+        b = rng.integers(0, p.shape[0], RANSAC_PAIRS)
+        d = p[b] - p[a]
+        length = np.linalg.norm(d, axis=1)
+        good = (length > 0.01) & (length < 1.0) & (peaks.pass_id[remaining][a] != peaks.pass_id[remaining][b])
+        if not good.any():
+            break
+        a, d, length = a[good], d[good], length[good]
+        n = np.column_stack([-d[:, 1], d[:, 0]]) / length[:, None]
+        dist = np.abs(np.einsum("hj,hnj->hn", n, p[None, :, :] - p[a][:, None, :]))  # (hypotheses, points)
+        counts = (dist < RANSAC_INLIER_M).sum(axis=1)
+        best = int(np.argmax(counts))
+        if counts[best] < MIN_PEAKS_PER_LINE:
+            break
+        inl = dist[best] < RANSAC_INLIER_M
+        for _ in range(2):  # least squares on the inliers, then re-collect them
+            c, u = _fit(p[inl])
+            nrm = np.array([-u[1], u[0]])
+            inl = np.abs((p - c) @ nrm) < RANSAC_INLIER_M
+            if inl.sum() < 2:
+                break
+        idx = remaining[inl]
+        c, u = _fit(peaks.xy[idx]) if idx.size >= 2 else (peaks.xy[idx[0]], np.array([1.0, 0.0]))
+        t = (peaks.xy[idx] - c) @ u
+        srt = np.argsort(t)
+        t, idx_sorted = t[srt], idx[srt]
+        cuts = np.flatnonzero(np.diff(t) > MAX_GAP_M) + 1
+        for tt, ii in zip(np.split(t, cuts), np.split(idx_sorted, cuts), strict=True):
+            if ii.size >= MIN_PEAKS_PER_LINE and len(set(peaks.pass_id[ii].tolist())) >= 2 and \
+                    tt[-1] - tt[0] >= tol.LINE_MIN_LENGTH_M:
+                cc, uu = _fit(peaks.xy[ii])
+                ts = (peaks.xy[ii] - cc) @ uu
+                runs.append((np.array([cc + ts.min() * uu, cc + ts.max() * uu]), ii))
+        remaining = remaining[~inl]
+    return runs
+
+
+def lines_from_passes(samples: dict[str, NDArray], xy: NDArray[np.float64], lag_m: float,
+                      inductive: InductiveModel, params: FusionParams) -> list[MapObject]:
+    """Classified line objects from the passes of a (sparse) scan."""
+    objects: list[MapObject] = []
+    if "ac" in samples:
+        ac = pass_peaks(samples, xy, "ac", 0.0, min_height=0.03)
+        crest = ac.width < AC_CREST_MAX_WIDTH_M
+        ac_crests = PassPeaks(ac.xy[crest], ac.height[crest], ac.width[crest], ac.axis[crest], ac.pass_id[crest],
+                              ac.baseline)
+        objects += _build(ac_crests, "ac", inductive, params)
+    if "inductive" in samples:
+        ind = pass_peaks(samples, xy, "inductive", lag_m, min_height=0.04)
+        kept = list(objects)
+        for obj in _build(ind, "inductive", inductive, params):
+            pts = np.vstack([obj.points_m[0] + t * (obj.points_m[-1] - obj.points_m[0])
+                             for t in np.linspace(0, 1, 11)])
+            if kept and np.min([distances_to_polyline(pts, k.points_m) for k in kept], axis=0).mean() < 0.015:
+                continue  # a cable the AC sensor already placed
+            objects.append(obj)
+    return objects
+
+
+def _build(peaks: PassPeaks, channel: str, model: InductiveModel, params: FusionParams) -> list[MapObject]:
+    runs = ransac_lines(peaks)
+    if not runs:
+        return []
+    polys = [r[0] for r in runs]
+    members = [r[1] for r in runs]
+    widths, strengths = [], []
+    for poly, ii in zip(polys, members, strict=True):
+        u = poly[1] - poly[0]
+        u = u / max(float(np.linalg.norm(u)), 1e-12)
+        # a pass crossing the line obliquely sees a wider peak: width across = FWHM · |sin(angle)|
+        pass_dir = np.where(peaks.axis[ii][:, None] == 0, [[1.0, 0.0]], [[0.0, 1.0]])
+        sin = np.abs(pass_dir[:, 0] * u[1] - pass_dir[:, 1] * u[0])
+        widths.append(float(np.median(peaks.width[ii] * sin)))
+        strengths.append(float(np.median(peaks.height[ii])))
+    joined, widths, strengths = _join(polys, widths, strengths)
+    out = []
+    for poly, width, height in zip(joined, widths, strengths, strict=True):
+        obj = MapObject("line", poly, width, height)
+        obj.features = {"length_m": obj.length_m(), "width_m": width, f"{channel}_peak": height,
+                        "source": 1.0 if channel == "ac" else 0.0}
+        if channel == "ac":
+            obj.cls, obj.confidence = "power_line", float(_sigmoid((height - 0.05) / 0.01))
+        else:
+            _classify_inductive(obj, peaks.baseline, model, params)
+        out.append(obj)
+    return out
+
+
+def _classify_inductive(obj: MapObject, baseline: float, model: InductiveModel, params: FusionParams) -> None:
+    seg = np.diff(obj.points_m, axis=0)
+    main = seg[int(np.argmax(np.linalg.norm(seg, axis=1)))]
+    depth = model.depth_from_width(obj.width_m, main)
+    amp = float(_raw(baseline + obj.strength) - _raw(baseline))
+    ratio = amp / model.pipe_peak_raw(depth, main)
+    obj.features.update({"inductive_raw": amp, "depth_est_m": depth, "strength_ratio": ratio})
+    log_ratio = float(np.log(max(ratio, 1e-6)))
+    cable = float(_sigmoid((np.log(params.cable_max_ratio) - log_ratio) / 0.3))
+    sheet = float(_sigmoid((log_ratio - np.log(params.area_min_ratio)) / 0.3))
+    scores = {"power_line": cable, "metal_pipe": (1 - cable) * (1 - sheet), "metal": (1 - cable) * sheet}
+    obj.cls = max(scores, key=scores.get)  # type: ignore[arg-type]
+    obj.confidence = float(scores[obj.cls] / max(sum(scores.values()), 1e-9))

@@ -1,0 +1,75 @@
+"""Object extraction on synthetic signal maps with known centre lines: straight, bent, diagonal, crossing."""
+
+import numpy as np
+import pytest
+
+from mapping.grid import build_grid
+from mapping.objects import extract_lines, extract_points, extract_regions
+from scanner.wall import densify, distance_to_polyline
+
+TRUTH = [
+    np.array([[0.30, 0.05], [0.30, 0.95]]),  # vertical
+    np.array([[0.50, 0.10], [0.90, 0.50], [0.90, 0.90]]),  # diagonal, then a bend to vertical
+    np.array([[0.05, 0.60], [1.10, 0.62]]),  # nearly horizontal, crossing both
+]
+SCREW = np.array([0.70, 0.20])
+
+
+@pytest.fixture(scope="module")
+def signal_grid():
+    rng = np.random.default_rng(1)
+    ys = np.arange(0.0, 1.0, 0.01)  # 1 cm raster lines
+    xs = np.arange(0.0, 1.2, 0.001)
+    X, Y = np.meshgrid(xs, ys)
+    p = np.column_stack([X.ravel(), Y.ravel()])
+    sig = np.zeros(len(p))
+    for line in TRUTH:
+        sig += np.exp(-0.5 * (distance_to_polyline(p, line) / 0.008) ** 2)
+    sig += 0.8 * np.exp(-0.5 * np.sum((p - SCREW) ** 2, axis=1) / 0.005**2)
+    sig += rng.normal(0, 0.02, len(p))
+    return build_grid(p, {"inductive": sig})
+
+
+def test_lines_are_found_as_polylines_with_submillimetre_centres(signal_grid):
+    lines = extract_lines(signal_grid.signal("inductive"), signal_grid.info)
+    assert len(lines) == 3  # crossings neither split nor join the lines
+    for truth in TRUTH:
+        probe = densify(truth, 0.01)[5:-5]  # the ends fade out over a few cm
+        d = np.stack([distance_to_polyline(probe, o.points_m) for o in lines])
+        best = lines[int(np.argmin(d.mean(axis=1)))]
+        assert (d.min(axis=0) < 0.01).mean() > 0.95
+        on = densify(best.points_m, 0.005)
+        err = distance_to_polyline(on, truth)
+        err = err[err < 0.01]
+        assert np.mean(err) < 0.001 and np.percentile(err, 95) < 0.003
+        assert len(best.points_m) == len(truth)  # a bend is one vertex, a straight run none
+    bent = min(lines, key=lambda o: np.min(np.linalg.norm(o.points_m - [0.9, 0.5], axis=1)))
+    vertex = bent.points_m[np.argmin(np.linalg.norm(bent.points_m - [0.9, 0.5], axis=1))]
+    assert np.linalg.norm(vertex - [0.9, 0.5]) < 0.004
+    seg = np.diff(bent.points_m, axis=0)
+    angles = np.degrees(np.arctan2(seg[:, 1], seg[:, 0])) % 180
+    assert min(abs(angles - 45.0)) < 1.0 and min(abs(angles - 90.0)) < 1.0
+
+
+def test_fastener_is_a_point_and_crossings_are_not(signal_grid):
+    from mapping.objects import drop_points_on_lines
+
+    lines = extract_lines(signal_grid.signal("inductive"), signal_grid.info)
+    points = drop_points_on_lines(extract_points(signal_grid.signal("inductive"), signal_grid.info), lines)
+    assert len(points) == 1
+    assert np.linalg.norm(points[0].points_m[0] - SCREW) < 0.001
+
+
+def test_wide_region_becomes_an_outline_and_lines_do_not():
+    rng = np.random.default_rng(2)
+    X, Y = np.meshgrid(np.arange(0, 1.0, 0.002), np.arange(0, 0.8, 0.01))
+    p = np.column_stack([X.ravel(), Y.ravel()])
+    stud = ((p[:, 0] > 0.40) & (p[:, 0] < 0.46)).astype(float) * 0.3  # a 6 cm stud
+    thin = 0.3 * np.exp(-0.5 * ((p[:, 0] - 0.8) / 0.004) ** 2)  # a thin line is not an area
+    sig = 0.4 + stud + thin + rng.normal(0, 0.004, len(p))
+    grid = build_grid(p, {"capacitive": sig})
+    regions = extract_regions(grid.signal("capacitive"), grid.info, +1.0, min_strength=8.0)
+    assert len(regions) == 1
+    ring = regions[0].points_m
+    assert abs(ring[:, 0].min() - 0.40) < 0.01 and abs(ring[:, 0].max() - 0.46) < 0.01
+    assert regions[0].width_m == pytest.approx(0.06, abs=0.01)
