@@ -81,26 +81,30 @@ def _log_rotation(R: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def _initial_model(angles: list[NDArray[np.float64]], poses: list[NDArray[np.float64]],
                    nominal: HeadModel | None) -> HeadModel:
-    """Axes and points from poses where one joint moved alone from the zero pose (else the nominal model)."""
+    """Axes and points from poses where one joint moved alone from a reference pose (else the nominal model).
+
+    The reference is the pose at commanded (0, 0, 0) if there is one, else the first pose (a head plan starts
+    at its centre). Axes seen about a reference away from zero are slightly turned by the joints before
+    them; the least-squares fit removes that.
+    """
     zero = [k for k, a in enumerate(angles) if np.allclose(a, 0.0)]
+    if not zero and nominal is not None:
+        return HeadModel(nominal.axes.copy(), nominal.points.copy(), nominal.T_robot_from_projector_zero.copy())
+    ref = zero[0] if zero else 0
     axes = nominal.axes.copy() if nominal is not None else np.eye(3)[[2, 1, 0]] * np.array([[1], [-1], [1]])
-    points = nominal.points.copy() if nominal is not None else np.tile(poses[0][:3, 3], (3, 1))
-    if not zero:
-        if nominal is None:
-            raise InputError("head calibration needs a pose at commanded angles (0, 0, 0) or a nominal head "
-                             "model to start from")
-        return HeadModel(axes, points, nominal.T_robot_from_projector_zero.copy())
-    T0 = poses[zero[0]]
+    points = nominal.points.copy() if nominal is not None else np.tile(poses[ref][:3, 3], (3, 1))
+    T_ref = poses[ref]
     for j in range(3):
-        moves = [k for k, a in enumerate(angles) if abs(a[j]) > 1.0 and np.allclose(np.delete(a, j), 0.0)]
+        deltas = [a - angles[ref] for a in angles]
+        moves = [k for k, d in enumerate(deltas) if abs(d[j]) > 1.0 and np.allclose(np.delete(d, j), 0.0)]
         estimates, pts = [], []
         for k in moves:
-            M = poses[k] @ invert(T0)  # rotation about joint j's line
+            M = poses[k] @ invert(T_ref)  # rotation about joint j's line
             v = _log_rotation(M[:3, :3])
             angle = np.linalg.norm(v)
             if angle < 1e-6:
                 continue
-            axis = v / angle * np.sign(angles[k][j])
+            axis = v / angle * np.sign(deltas[k][j])
             estimates.append(axis)
             # Points p on the line satisfy (I - R) p = t; least squares gives the one nearest the origin.
             p, *_ = np.linalg.lstsq(np.eye(3) - M[:3, :3], M[:3, 3], rcond=1e-9)  # rank 2: drop the axis
@@ -109,7 +113,12 @@ def _initial_model(angles: list[NDArray[np.float64]], poses: list[NDArray[np.flo
             a = np.mean(estimates, axis=0)
             axes[j] = a / np.linalg.norm(a)
             points[j] = np.mean(pts, axis=0)
-    return HeadModel(axes, points, T0.copy())
+    # T_ref = E1(a1) E2(a2) E3(a3) T_zero, so T_zero = E3(-a3) E2(-a2) E1(-a1) T_ref.
+    T_zero = T_ref.copy()
+    for j in range(3):
+        R = rotation_about(axes[j], -np.radians(angles[ref][j]))
+        T_zero = make_pose(R, points[j] - R @ points[j]) @ T_zero
+    return HeadModel(axes, points, T_zero)
 
 
 def fit_head(angles_deg: list[ArrayLike], T_base_from_projector: list[NDArray[np.float64]],

@@ -65,8 +65,8 @@ class SimStation:
         self.rng = np.random.default_rng(seed + 1000)
         # The projector shows black while boards are photographed (room light only).
         self._black = np.zeros((self.site.projector.height, self.site.projector.width), np.uint8)
-        # Head angles are relative to a base that puts the projected image's centre (not the optical axis,
-        # which lens shift moves off the image) at the aim point, so the image stays in the cameras' view.
+        # The head plan turns about these angles: they put the projected image's centre (not the optical
+        # axis, which lens shift moves off the image) at the aim point, so the image stays in the cameras' view.
         p = self.site.projector
         shift_deg = np.degrees(np.arctan((p.cy - (p.height - 1) / 2) / p.fy))
         self.aim_deg = self.site.head_angles_cmd_deg.copy() + np.array([0.0, -shift_deg, 0.0])
@@ -104,8 +104,8 @@ class SimStation:
         return left, right
 
     def command_head(self, angles_deg: NDArray[np.float64]) -> None:
-        """Move the head to angles (relative to the aim angles), always arriving from below."""
-        target = self.aim_deg + np.asarray(angles_deg, dtype=np.float64)
+        """Move the head to these (absolute, commanded) angles, always arriving from below."""
+        target = np.asarray(angles_deg, dtype=np.float64)
         self.site.set_head(target - HEAD_APPROACH_DEG)
         self.site.set_head(target)
 

@@ -1,7 +1,10 @@
 """The wizard's steps on a calibration station (the simulated site, or real devices with the same methods).
 
-A station offers: board_views(board, n) → (left views, right views); command_head(angles relative to the
-aim pose); project(image) → (left photo, right photo); projector_size; T_robot_from_camera_left_design.
+A station offers: board_views(board, n) → (left views, right views); aim_deg (head angles that put the
+projected image in the cameras' view); command_head(absolute head angles, as the head itself counts them);
+project(image) → (left photo, right photo); projector_size; T_robot_from_camera_left_design.
+The head plan's excursions are added to aim_deg, and every measurement records the absolute commanded
+angles: the head model maps those, and nothing else, to the projector's pose.
 Each step returns a JSON-ready dict (quality figures; for later steps, the measurements they need).
 """
 
@@ -42,6 +45,7 @@ Track = Callable[[Iterable, str, int], Iterator]
 
 class Station(Protocol):
     projector_size: tuple[int, int]
+    aim_deg: NDArray[np.float64]
 
     def board_views(self, board: Board, n: int) -> tuple[list[BoardView | None], list[BoardView | None]]: ...
     def command_head(self, angles_deg: NDArray[np.float64]) -> None: ...
@@ -61,6 +65,13 @@ def step_stereo(station: Station, out: Path, board_spec: str, n_poses: int = STE
     result = {"quality": calib.quality(), "advice": coverage_advice(calib.coverage),
               "views_without_board": missing}
     return result, rig
+
+
+def head_angles(station: Any) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
+    """(fitting, checking) absolute head angles: the head plan's excursions about the station's aim."""
+    fit, check = head_plan(*HEAD_PLAN_DEG)
+    aim = np.asarray(station.aim_deg, dtype=np.float64)
+    return [aim + np.asarray(a) for a in fit], [aim + np.asarray(a) for a in check]
 
 
 def _stereo_of(rig: Rig) -> tuple[Intrinsics, Intrinsics, NDArray[np.float64]]:
@@ -84,7 +95,7 @@ def step_projector(station: Station, rig: Rig, out: Path, track: Track) -> tuple
     """Projected chessboard at the head plan's angles → projector intrinsics and its pose at every angle."""
     w, h = station.projector_size
     grid = projected_charuco(w, h, PROJECTOR_SQUARE_PX)
-    fit_angles, _ = head_plan(*HEAD_PLAN_DEG)
+    fit_angles, _ = head_angles(station)
     points, pixels, used, skipped = [], [], [], []
     for angles in track(fit_angles, "projector: projecting the grid", len(fit_angles)):
         m = _measure(station, rig, grid, angles)
@@ -131,7 +142,7 @@ def step_validation(station: Station, rig: Rig, out: Path, track: Track) -> dict
     """Project a different grid at head angles not used for fitting; 3-D error of the prediction, mm."""
     w, h = station.projector_size
     grid = projected_charuco(w, h, VALIDATION_SQUARE_PX)
-    _, check_angles = head_plan(*HEAD_PLAN_DEG)
+    _, check_angles = head_angles(station)
     projector = rig.intrinsics["projector"]
     errors, per_angle = [], []
     for angles in track(check_angles, "validation: projecting a known grid", len(check_angles)):
@@ -175,7 +186,7 @@ def projector_truth_errors(rig: Rig, truth: Any) -> dict:
 
 def head_truth_errors(station: Any, rig: Rig) -> dict:
     """Predicted vs true projector pose at the check angles (never used for fitting)."""
-    _, check_angles = head_plan(*HEAD_PLAN_DEG)
+    _, check_angles = head_angles(station)
     rot, pos = [], []
     for angles in check_angles:
         true = station.true_T_left_from_projector(angles)
@@ -189,7 +200,7 @@ def validation_truth_errors(station: Any, rig: Rig) -> dict:
     """Predicted landing of a projected grid vs where it truly lands (simulated truth), at the check angles."""
     w, h = station.projector_size
     grid = projected_charuco(w, h, VALIDATION_SQUARE_PX)
-    _, check_angles = head_plan(*HEAD_PLAN_DEG)
+    _, check_angles = head_angles(station)
     d = []
     for angles in check_angles:
         station.command_head(angles)
