@@ -91,6 +91,8 @@ class Intrinsics:
     def rays(self, pixels: ArrayLike) -> NDArray[np.float64]:
         """Unit-z rays (n, 3) in the camera frame through pixels (n, 2), undoing distortion."""
         uv = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
+        if len(uv) == 0:  # cv2.undistortPoints returns None for no points
+            return np.zeros((0, 3))
         if self.has_distortion:
             # Tight iteration: the default stops at ~1e-3 px, too coarse for sub-0.05 px work.
             xy = cv2.undistortPoints(uv, self.K, self.dist_array, None, None, None,

@@ -56,6 +56,20 @@ def test_noise_free_fit_is_exact_and_rebase_keeps_predictions() -> None:
         assert np.allclose(moved.T_robot_from_projector(a), T_new @ fit.model.T_robot_from_projector(a), atol=1e-12)
 
 
+def test_plan_about_an_aim_pose_is_fitted_in_absolute_angles() -> None:
+    # The wizard turns the head about an aim pose (here 4° of tilt), so no pose sits at commanded (0, 0, 0);
+    # the model must still map the absolute angles the head reports to the projector's pose.
+    rng = np.random.default_rng(2)
+    truth = true_head()
+    aim = np.array([1.5, -4.1, 0.0])
+    fit_angles, check_angles = head_plan(15.0, 10.0, 10.0)
+    fit_abs = [aim + a for a in fit_angles]
+    check_abs = [aim + a for a in check_angles] + [np.zeros(3)]
+    fit = fit_head(fit_abs, measure(truth, fit_abs, rng, 0.01, (0.005, 0.0002)))
+    rot, pos = head_errors(fit.model, check_abs, measure(truth, check_abs, rng, 0.0, (0.0, 0.0)))
+    assert max(rot) < 0.05 and max(pos) < 0.001
+
+
 def test_too_few_poses_or_a_joint_that_never_moves() -> None:
     truth = true_head()
     angles = [np.array([p, t, 0.0]) for p in (-20, 0, 20) for t in (-10, 0, 10)]
