@@ -38,25 +38,51 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         quick: bool = typer.Option(False, "--quick", help="Fewer trials in every benchmark."),
         seed: int = typer.Option(0, "--seed", help="Seed of the simulated inputs."),
     ) -> None:
-        """Run every benchmark and print one summary table of the headline figures."""
+        """Run every benchmark, each in its own process, and print one summary table of the headline figures."""
         from rich.table import Table
 
-        results: dict[str, BenchTable] = {}
-        for name, module in modules.items():
+        results: dict[str, BenchTable | str] = {}
+        for name in modules:
             err_console.print(f"[bold]bench {name}[/] …")
-            results[name] = module.run(quick=quick, seed=seed)
-            if not as_json:
+            results[name] = _run_isolated(name, quick, seed)
+            if isinstance(results[name], str):
+                err_console.print(f"[red]bench {name} failed:[/] {results[name]}")
+            elif not as_json:
                 results[name].print()
         if as_json:
-            print(json.dumps({n: json.loads(t.to_json()) for n, t in results.items()}, indent=2))
+            print(json.dumps({n: (json.loads(t.to_json()) if isinstance(t, BenchTable) else {"failed": t})
+                              for n, t in results.items()}, indent=2))
             return
         summary = Table(title="arproj bench all — headline figures", title_justify="left")
         for col in ("benchmark", "figure", "arproj", "peer", "peer is", "target", "met"):
             summary.add_column(col)
         for name, table in results.items():
+            if isinstance(table, str):
+                summary.add_row(name, "failed", "–", "–", "", "", "NO")
+                continue
             for label, h in table.headline.items():
                 met = h.get("met")
                 summary.add_row(name, label, f"{h.get('arproj', '')}{h.get('unit', '')}",
                                 f"{h.get('peer', '–')}", str(h.get("peer_name", "")), str(h.get("target", "")),
                                 "–" if met is None else ("yes" if met else "NO"))
         console.print(summary)
+        if any(isinstance(t, str) for t in results.values()):
+            raise typer.Exit(1)
+
+
+def _run_isolated(name: str, quick: bool, seed: int) -> BenchTable | str:
+    """One benchmark in a fresh process: GL contexts, EGL displays (pyrender terminates its display when it is
+    done) and memory of one benchmark cannot disturb the next. Returns the table, or why it failed."""
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-c", "from arproj.cli import main; main()", "bench", name, "--json", "--seed", str(seed)]
+    if quick:
+        cmd.append("--quick")
+    done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=None, text=True)
+    if done.returncode != 0:
+        return f"exit status {done.returncode} (its messages are above)"
+    try:
+        return BenchTable(**json.loads(done.stdout))
+    except (json.JSONDecodeError, TypeError) as err:
+        return f"unreadable result ({err})"

@@ -1,0 +1,182 @@
+"""Wall pose from the projected pattern vs the paper's four-corner square, on the simulated site.
+
+Distances 1–4 m × incidence 0–60°, seeded trials (robot placement, head repeatability, localization, sensor
+noise all vary); per row the median and 95th-percentile normal-angle error and distance error at the pattern's
+centre for arproj and the baseline, their ratio, how often arproj's reported 95 % bounds hold the truth, and
+the time per estimate (detection included; rendering not).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from arproj.bench import BenchTable
+from arproj.console import progress_bar
+from arproj.wallpose.baseline import SquarePattern, estimate_plane_baseline
+from arproj.wallpose.estimate import estimate_plane
+from arproj.wallpose.evidence import NotEnoughEvidenceError
+from arproj.wallpose.pattern import choose_pattern
+from arproj.wallpose.simtrial import LARGE_ROOM, calibrated_views, photograph_pair, true_landing, wall_truth
+
+DISTANCES_M = (1.0, 2.0, 3.0, 4.0)
+INCIDENCES_DEG = (0.0, 30.0, 45.0, 60.0)
+TRIALS, QUICK_TRIALS = 50, 5
+# per-trial jitter of the placement so trials differ in more than sensor noise
+JITTER_DISTANCE = 0.05      # fraction of the distance
+JITTER_INCIDENCE_DEG = 2.0
+JITTER_ALONG_M = 0.4
+AIM_HEIGHT_RANGE_M = (1.0, 1.2)   # the pattern shows above the aim point (lens shift); cameras see it
+TARGETS = {2.0: (0.05, 1.0), 4.0: (0.15, 3.0)}   # distance: (median normal error °, median distance error mm)
+MIN_RATIO, MIN_COVERAGE, MAX_TIME_MS = 5.0, 0.95, 100.0
+
+
+def _square_on_wall(site: object, pattern: object) -> SquarePattern:
+    """The paper's square, as large as possible but wholly on the wall (chosen with the simulator's truth, in
+    the baseline's favour: the paper's operator would aim it so)."""
+    fraction = 0.8
+    while True:
+        square = SquarePattern.like(pattern, fraction)  # type: ignore[arg-type]
+        landing = site.raycast("projector", square.corners_px)  # type: ignore[attr-defined]
+        if np.all(landing.wall_index.reshape(-1) == 0) or fraction < 0.1:
+            return square
+        fraction *= 0.85
+
+
+def _median(values: list[float]) -> float:
+    return float(np.median(values)) if values else float("nan")
+
+
+def _p95(values: list[float]) -> float:
+    return float(np.percentile(values, 95)) if values else float("nan")
+
+
+def run(quick: bool = False, seed: int = 0) -> BenchTable:
+    from arproj.gl import create_context
+    from arproj.sim import Site
+
+    trials = QUICK_TRIALS if quick else TRIALS
+    rng = np.random.default_rng(seed)
+    rows, summary = [], {}
+    started = time.perf_counter()
+    # a context of our own: the site's GPU objects live exactly as long as this run
+    ctx = create_context()
+    with Site.build(seed=seed, room=LARGE_ROOM, ctx=ctx) as site, progress_bar() as bar:
+        task = bar.add_task("wallpose trials", total=len(DISTANCES_M) * len(INCIDENCES_DEG) * trials)
+        wall_width = site.walls[0].width_m
+        for distance in DISTANCES_M:
+            for incidence in INCIDENCES_DEG:
+                stats = {k: [] for k in ("n", "d", "bn", "bd", "cov_n", "cov_d", "t", "cpu", "bt")}
+                declined: list[str] = []
+                pattern = None
+                for _ in range(trials):
+                    site.place_robot(distance * (1 + rng.uniform(-1, 1) * JITTER_DISTANCE),
+                                     incidence + rng.uniform(-1, 1) * JITTER_INCIDENCE_DEG,
+                                     along_m=wall_width / 2 + rng.uniform(-1, 1) * JITTER_ALONG_M,
+                                     aim_height_m=rng.uniform(*AIM_HEIGHT_RANGE_M))
+                    views = calibrated_views(site)
+                    if pattern is None:  # one pattern per row, chosen from the nominal distance
+                        pattern = choose_pattern(views, distance, incidence)
+                    square = _square_on_wall(site, pattern)
+                    truth = wall_truth(site)
+                    left, right = photograph_pair(site, pattern.image(), rng)
+                    sq_left, sq_right = photograph_pair(site, square.image(), rng)
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    try:
+                        est = estimate_plane(left, right, pattern, views, seed=seed)
+                    except NotEnoughEvidenceError as err:
+                        declined.append(err.code)
+                        est = None
+                    t1, c1 = time.perf_counter(), time.process_time()
+                    try:
+                        base = estimate_plane_baseline(sq_left, sq_right, views)
+                    except NotEnoughEvidenceError as err:
+                        declined.append("baseline:" + err.code)
+                        base = None
+                    t2 = time.perf_counter()
+                    if est is not None:
+                        centre = true_landing(site, pattern.centre_px[None])[0]
+                        n_err, d_err = est.normal_error_deg(truth.normal), abs(est.offset_at(centre))
+                        stats["n"].append(n_err)
+                        stats["d"].append(1000 * d_err)
+                        stats["cov_n"].append(n_err <= est.normal_95_deg)
+                        stats["cov_d"].append(d_err <= est.centre_distance_95_m)
+                        stats["t"].append(1000 * (t1 - t0))
+                        stats["cpu"].append(1000 * (c1 - c0))
+                    if base is not None:
+                        centre = true_landing(site, square.centre_px[None])[0]
+                        stats["bn"].append(base.normal_error_deg(truth.normal))
+                        stats["bd"].append(1000 * abs(base.offset_at(centre)))
+                        stats["bt"].append(1000 * (t2 - t1))
+                    bar.advance(task)
+                row = _row(distance, incidence, stats, declined, trials)
+                rows.append(row)
+                summary[(distance, incidence)] = row
+    ctx.release()
+    elapsed = time.perf_counter() - started
+    return _table(rows, summary, trials, elapsed, quick)
+
+
+def _row(distance: float, incidence: float, s: dict, declined: list[str], trials: int) -> list:
+    n_med, d_med, bn_med, bd_med = _median(s["n"]), _median(s["d"]), _median(s["bn"]), _median(s["bd"])
+    reasons = ", ".join(f"{c}×{declined.count(c)}" for c in sorted(set(declined))) or "–"
+    return [f"{distance:.0f} m / {incidence:.0f}°", n_med, _p95(s["n"]), bn_med, _p95(s["bn"]),
+            bn_med / n_med if n_med > 0 else float("nan"), d_med, _p95(s["d"]), bd_med, _p95(s["bd"]),
+            bd_med / d_med if d_med > 0 else float("nan"),
+            float(np.mean(s["cov_n"])) if s["cov_n"] else float("nan"),
+            float(np.mean(s["cov_d"])) if s["cov_d"] else float("nan"),
+            _median(s["cpu"]), _median(s["t"]), _median(s["bt"]), f"{len(s['n'])}/{trials}", reasons]
+
+
+COLUMNS = ["row", "n° med", "n° p95", "paper n° med", "paper n° p95", "ratio n", "mm med", "mm p95",
+           "paper mm med", "paper mm p95", "ratio mm", "95% ok n", "95% ok mm", "cpu ms", "wall ms", "paper ms",
+           "ok", "declined"]
+
+
+def _table(rows: list[list], summary: dict, trials: int, elapsed: float, quick: bool) -> BenchTable:
+    headline = {}
+    for dist, (n_target, d_target) in TARGETS.items():
+        if dist not in DISTANCES_M:
+            continue
+        row_n = [summary[(dist, inc)][1] for inc in INCIDENCES_DEG]
+        row_d = [summary[(dist, inc)][6] for inc in INCIDENCES_DEG]
+        worst_n, worst_d = float(np.nanmax(row_n)), float(np.nanmax(row_d))
+        headline[f"median normal error at {dist:.0f} m (worst incidence ≤ 60°)"] = {
+            "arproj": round(worst_n, 4), "peer": round(float(np.nanmax([summary[(dist, i)][3]
+                                                                    for i in INCIDENCES_DEG])), 4),
+            "peer_name": "paper's four corners", "unit": "°", "target": f"≤ {n_target}°",
+            "met": bool(worst_n <= n_target)}
+        headline[f"median distance error at {dist:.0f} m (worst incidence ≤ 60°)"] = {
+            "arproj": round(worst_d, 3), "peer": round(float(np.nanmax([summary[(dist, i)][8]
+                                                                    for i in INCIDENCES_DEG])), 3),
+            "peer_name": "paper's four corners", "unit": " mm", "target": f"≤ {d_target} mm",
+            "met": bool(worst_d <= d_target)}
+    ratios = [min(r[5], r[10]) for r in rows]
+    headline["lowest ratio paper/arproj of median errors (any row)"] = {
+        "arproj": round(float(np.nanmin(ratios)), 2), "peer": 1.0, "peer_name": "paper's four corners",
+        "unit": "×", "target": f"≥ {MIN_RATIO}×", "met": bool(np.nanmin(ratios) >= MIN_RATIO)}
+    cover = [min(r[11], r[12]) for r in rows]
+    headline["lowest coverage of the reported 95 % bounds (any row)"] = {
+        "arproj": round(float(np.nanmin(cover)), 3), "peer": "–", "peer_name": "(the paper reports none)",
+        "unit": "", "target": f"≥ {MIN_COVERAGE}", "met": bool(np.nanmin(cover) >= MIN_COVERAGE)}
+    worst_t = float(np.nanmax([r[13] for r in rows]))
+    headline["median CPU time per estimate (worst row)"] = {
+        "arproj": round(worst_t, 1), "peer": round(float(np.nanmax([r[15] for r in rows])), 1),
+        "peer_name": "paper's four corners", "unit": " ms", "target": f"≤ {MAX_TIME_MS:.0f} ms",
+        "met": bool(worst_t <= MAX_TIME_MS)}
+    notes = [
+        f"{trials} trials per row{' (--quick)' if quick else ''}; total runtime {elapsed:.0f} s, mostly "
+        "rendering (4 simulated photos per trial).",
+        "Errors: angle between estimated and true wall normal; |offset| of the true landing point of the "
+        "pattern's (square's) centre from the estimated plane.",
+        "Rig: true intrinsics, camera poses and head kinematics incl. angle bias (a perfect calibration); the "
+        "head's repeatability (angle noise, backlash) stays unknown and is estimated. Cameras auto-exposed.",
+        "95% ok: fraction of arproj's trials whose true error is within its reported 95 % bound (n: normal, "
+        "mm: distance at the centre).",
+        "cpu ms: process CPU time per estimate (detection in both images + fit + checks), the figure judged; "
+        "wall ms is inflated when the machine is shared. Columns n°: normal-angle error; mm: distance error.",
+    ]
+    return BenchTable(name="wallpose", title="Wall pose: arproj (checker + markers, 3 views) vs the paper's "
+                      "single square (4 corners, stereo)", columns=COLUMNS, rows=rows, notes=notes,
+                      headline=headline, environment={"trials_per_row": trials, "runtime_s": round(elapsed, 1)})

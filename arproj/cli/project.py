@@ -1,0 +1,98 @@
+"""`arproj project`: the projection session at the drilling site.
+
+    arproj project --map OUT/wall.glb --rig RIG_DIR --sim [--aim 1.2,1.1] [--drill 1.25,1.0] [--output DIR]
+    arproj project --truth scanner/walls/demo_brick_wall.yaml --sim --follow '1.0,1.0;1.3,1.1;1.8,1.2'
+    arproj project --map wall.glb --rig RIG --head /dev/ttyUSB0 --left 0 --right 1 --wall-prior prior.yaml \
+        --window --screen 1
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import typer
+
+from arproj.console import console, err_console
+from geometry.errors import InputError
+
+
+def _point(text: str, option: str) -> tuple[float, float]:
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"{option} {text!r} is not X,Y in metres", "e.g. --aim 1.2,1.1") from None
+    return x, y
+
+
+def _points(text: str, option: str) -> list[tuple[float, float]]:
+    return [_point(p, option) for p in text.split(";") if p.strip()]
+
+
+def _stdin_lines() -> Iterator[str]:
+    import sys
+
+    yield from sys.stdin
+
+
+def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+    @app.command()
+    def project(
+        map_path: Path = typer.Option(None, "--map", help="wall.glb from `arproj map` (objects.json beside it)."),
+        objects: Path = typer.Option(None, "--objects", help="objects.json, if not beside the GLB."),
+        truth: Path = typer.Option(None, "--truth", help="Project a wall file's truth instead of a map "
+                                   "(scanner wall YAML; for trying the session before mapping)."),
+        rig_dir: Path = typer.Option(None, "--rig", help="Rig folder from `arproj calibrate` (rig.yaml)."),
+        sim: bool = typer.Option(False, "--sim", help="Run on the simulated site (head simulator over "
+                                 "socket://, simulated cameras); no hardware."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the simulated site."),
+        wall_index: int = typer.Option(0, "--wall", help="Which wall of the room the map belongs to."),
+        distance: float = typer.Option(2.5, "--distance", help="--sim: robot's distance to the wall, metres."),
+        incidence: float = typer.Option(0.0, "--incidence", help="--sim: robot's angle to the wall, degrees."),
+        aim: str = typer.Option(None, "--aim", help="Wall point X,Y (metres) to centre the image on."),
+        drill: str = typer.Option(None, "--drill", help="Drill point X,Y (metres): distance and verdict."),
+        follow: str = typer.Option(None, "--follow", help="Follow a drill target along 'X,Y;X,Y;…'."),
+        cycles: int = typer.Option(1, "--cycles", help="Update cycles (re-estimate on motion, verify, show); "
+                                   "0: until Ctrl-C."),
+        output: Path = typer.Option(None, "--output", help="Also write every beamer frame to DIR as PNG."),
+        window: bool = typer.Option(False, "--window", help="Show frames in a borderless fullscreen window."),
+        screen: int = typer.Option(0, "--screen", help="Display screen of the beamer for --window."),
+        head_url: str = typer.Option(None, "--head", help="Pan/tilt head: serial port or socket:// URL."),
+        left: str = typer.Option("0", "--left", help="Left camera: index, file or URL (hardware)."),
+        right: str = typer.Option("1", "--right", help="Right camera: index, file or URL (hardware)."),
+        wall_prior: Path = typer.Option(None, "--wall-prior", help="Hardware: YAML with T_wall_from_robot "
+                                        "(in-plane position of the wall frame)."),
+        head_fault: str = typer.Option(None, "--head-fault", help="--sim: inject a head fault: dead, "
+                                       "slip:PAN,TILT (degrees) or flaky."),
+        interactive: bool = typer.Option(False, "--interactive", help="After the first cycle, read commands "
+                                         "from the terminal: aim X,Y | drill X,Y | check X,Y | update | "
+                                         "estimate | status | quit."),
+        as_json: bool = typer.Option(False, "--json", help="Print the session's results as JSON."),
+    ) -> None:
+        """Project the in-wall map onto the wall, pre-warped for the beamer, with a safety gate."""
+        from arproj.session.cli_run import SessionOptions, run_session
+
+        options = SessionOptions(
+            map_path=map_path, objects=objects, truth=truth, rig_dir=rig_dir, sim=sim, seed=seed,
+            wall_index=wall_index, distance=distance, incidence=incidence,
+            aim=_point(aim, "--aim") if aim else None, drill=_point(drill, "--drill") if drill else None,
+            follow=_points(follow, "--follow") if follow else [], cycles=cycles, output=output, window=window,
+            screen=screen, head_url=head_url, left=left, right=right, wall_prior=wall_prior,
+            head_fault=head_fault, commands=_stdin_lines() if interactive else None)
+        result = run_session(options, say=lambda text: err_console.print(text, highlight=False))
+        if as_json:
+            print(json.dumps(result, indent=2))
+        else:
+            for cycle in result["cycles"]:
+                status = "MAP SHOWN" if cycle["show_map"] else "WARNING SHOWN: " + "; ".join(cycle["reasons"])
+                console.print(f"cycle {cycle['cycle']}: {status}", highlight=False)
+                if cycle.get("drill"):
+                    console.print(f"  drill point {cycle['drill']['xy']}: {cycle['drill']['message']}",
+                                  highlight=False)
+                if cycle.get("closed_loop_mm"):
+                    c = cycle["closed_loop_mm"]
+                    console.print(f"  closed loop: {c['seen']} marks, error mean {c['mean']:.2f} mm, p95 "
+                                  f"{c['p95']:.2f} mm (offset corrected {c['corrected']})", highlight=False)
+            if result.get("frames"):
+                console.print(f"frames written to {result['frames']}", highlight=False)

@@ -1,0 +1,167 @@
+"""`arproj wallpose`: measure the wall's pose once from the projected pattern and print (and draw) it.
+
+    arproj wallpose --sim --distance 2 --incidence 30            on the simulated site, compared with its truth
+    arproj wallpose --pattern-out pattern.png --rig RIG --head 0,5,0 --distance 2   the image to project
+    arproj wallpose --rig RIG --head 0,5,0 --distance 2 --left L.png --right R.png  from real photos
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import typer
+
+from arproj.console import console
+from geometry.errors import InputError
+
+
+def _head_angles(text: str) -> np.ndarray:
+    try:
+        values = np.array([float(v) for v in text.split(",")])
+    except ValueError:
+        raise InputError(f"--head {text!r} is not three numbers", "e.g. --head 0,5.5,0 (pan, tilt, roll °)") from None
+    if values.shape != (3,):
+        raise InputError(f"--head {text!r} has {values.size} angles; pan, tilt and roll are needed")
+    return values
+
+
+def _read_gray(path: Path, option: str) -> np.ndarray:
+    import cv2
+
+    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if image is None:
+        raise InputError(f"{option} {path}: not a readable image", "pass a PNG or JPEG photo of the pattern")
+    return image
+
+
+def draw_result(image: np.ndarray, corners: np.ndarray, used: np.ndarray, lines: list[str], path: Path) -> Path:
+    """The camera image with the corners found (green: used, red: left out) and the figures written on it."""
+    import cv2
+
+    canvas = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image.copy()
+    for (x, y), ok in zip(corners, used, strict=True):
+        cv2.circle(canvas, (round(x), round(y)), 3, (0, 200, 0) if ok else (0, 0, 255), 1, cv2.LINE_AA)
+    for k, text in enumerate(lines):
+        cv2.putText(canvas, text, (12, 26 + 22 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 3, cv2.LINE_AA)
+        cv2.putText(canvas, text, (12, 26 + 22 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1, cv2.LINE_AA)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), canvas)
+    return path
+
+
+def run_wallpose(sim: bool, distance: float, incidence: float, seed: int, rig: Path | None, head: str | None,
+                 left: Path | None, right: Path | None, pattern_out: Path | None, picture: Path) -> dict:
+    """Everything `arproj wallpose` does; returns the figures it prints."""
+    from arproj.wallpose.detect import detect
+    from arproj.wallpose.estimate import estimate_from_detections
+    from arproj.wallpose.pattern import choose_pattern
+    from arproj.wallpose.rig import ViewRig
+
+    if not sim and rig is None:
+        raise InputError("no rig given", "pass --sim for the simulated site, or --rig FOLDER --head PAN,TILT,ROLL")
+    site = None
+    if sim:
+        from arproj.sim import Site
+        from arproj.wallpose.simtrial import LARGE_ROOM, calibrated_views, photograph_pair
+
+        site = Site.build(seed=seed, room=LARGE_ROOM)
+        site.place_robot(distance, incidence, aim_height_m=1.1)
+        views = calibrated_views(site)
+    else:
+        from geometry.rig import Rig
+
+        if head is None:
+            raise InputError("--head is needed with --rig", "the head's current pan,tilt,roll in degrees")
+        views = ViewRig.from_rig(Rig.load(rig), _head_angles(head))
+    pattern = choose_pattern(views, distance, incidence)
+    result: dict = {"pattern": {"square_px": pattern.square_px, "squares": [pattern.cols, pattern.rows],
+                                "markers": len(pattern.marker_blocks), "corners": pattern.n_corners}}
+    if pattern_out is not None:
+        import cv2
+
+        pattern_out.parent.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(pattern_out), pattern.image())
+        result["pattern_image"] = str(pattern_out)
+        if not sim and left is None:
+            return result
+    try:
+        if sim:
+            image_l, image_r = photograph_pair(site, pattern.image(), np.random.default_rng(seed))
+        else:
+            if left is None or right is None:
+                raise InputError("--left and --right photos are needed with --rig",
+                                 "photograph the projected pattern (see --pattern-out) with both cameras")
+            image_l, image_r = _read_gray(left, "--left"), _read_gray(right, "--right")
+        det_l = detect(image_l, pattern, views.camera_left, views.projector, "camera_left")
+        det_r = detect(image_r, pattern, views.camera_right, views.projector, "camera_right")
+        est = estimate_from_detections(det_l, det_r, pattern, views, seed=seed)
+        result["plane"] = {
+            "normal_robot": est.normal.round(6).tolist(), "distance_m": round(est.distance, 5),
+            "normal_95_deg": round(est.normal_95_deg, 4),
+            "centre_distance_95_mm": round(1000 * est.centre_distance_95_m, 3),
+            "corners_used": est.corners, "corners_matched": est.matched, "corner_noise_px": round(est.sigma_px, 4),
+            "projector_correction_deg": round(est.projector_correction_deg, 4), "warnings": est.warnings}
+        lines = [f"normal ±{est.normal_95_deg:.3f} deg, distance {est.distance:.4f} m "
+                 f"±{1000 * est.centre_distance_95_m:.2f} mm (95%)",
+                 f"{est.corners} corners, noise {est.sigma_px:.3f} px"]
+        if site is not None:
+            from arproj.wallpose.pose import RoomMap, estimate_wall_pose
+            from arproj.wallpose.simtrial import true_landing, wall_truth
+            from geometry.poses import invert, rotation_angle_deg
+
+            truth = wall_truth(site)
+            centre = true_landing(site, pattern.centre_px[None])[0]
+            result["truth"] = {"normal_error_deg": round(est.normal_error_deg(truth.normal), 5),
+                               "distance_error_mm": round(1000 * abs(est.offset_at(centre)), 4)}
+            T_robot_from_projector = views.T_robot_from_camera_left @ est.T_camera_left_from_projector
+            pose = estimate_wall_pose(est, 0, RoomMap.from_site(site), site.localized_T_room_from_robot,
+                                      T_robot_from_projector, site.laser_scan().points_robot())
+            T_true = invert(site.walls[0].T_room_from_wall) @ site.T_room_from_robot
+            result["pose"] = {
+                "T_wall_from_robot": pose.T_wall_from_robot.round(6).tolist(),
+                "sigma_mm_along_height_distance": [round(1000 * v, 3) for v in
+                                                   (pose.sigma_along_m, pose.sigma_height_m, pose.sigma_distance_m)],
+                "error_mm_along_height_distance":
+                    (1000 * (pose.T_wall_from_robot[:3, 3] - T_true[:3, 3])).round(3).tolist(),
+                "rotation_error_deg": round(rotation_angle_deg(pose.T_wall_from_robot, T_true), 4),
+                "sources": pose.sources}
+            lines.append(f"truth: normal off by {result['truth']['normal_error_deg']:.4f} deg, "
+                         f"{result['truth']['distance_error_mm']:.3f} mm at the centre")
+        used = np.isin(det_l.corner_ids, est.inlier_ids)
+        result["picture"] = str(draw_result(image_l, det_l.pixels, used, lines, picture))
+    finally:
+        if site is not None:
+            site.release()
+    return result
+
+
+def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+    @app.command("wallpose")
+    def wallpose(
+        sim: bool = typer.Option(False, "--sim", help="Use the simulated site (and compare with its truth)."),
+        distance: float = typer.Option(2.0, "--distance", help="Approximate distance to the wall, m (sizes the "
+                                       "pattern; with --sim: where the robot stands)."),
+        incidence: float = typer.Option(0.0, "--incidence", help="Approximate incidence angle on the wall, °."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the simulated site."),
+        rig: Path | None = typer.Option(None, "--rig", help="Calibrated rig folder (rig.yaml)."),
+        head: str | None = typer.Option(None, "--head", help="The head's current pan,tilt,roll in degrees."),
+        left: Path | None = typer.Option(None, "--left", help="Left camera photo of the projected pattern."),
+        right: Path | None = typer.Option(None, "--right", help="Right camera photo of the projected pattern."),
+        pattern_out: Path | None = typer.Option(None, "--pattern-out", help="Write the pattern to project (PNG)."),
+        picture: Path = typer.Option(Path("wallpose.png"), "--picture", help="Where to draw the result."),
+        as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+    ) -> None:
+        """Measure the wall's pose once from the projected checker pattern seen by both cameras."""
+        result = run_wallpose(sim, distance, incidence, seed, rig, head, left, right, pattern_out, picture)
+        if as_json:
+            print(json.dumps(result, indent=2))
+            return
+        for section, values in result.items():
+            if isinstance(values, dict):
+                console.print(f"[bold]{section}[/]")
+                for key, value in values.items():
+                    console.print(f"  {key}: {value}", highlight=False)
+            else:
+                console.print(f"[bold]{section}[/]: {values}", highlight=False)

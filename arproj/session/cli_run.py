@@ -1,0 +1,264 @@
+"""What `arproj project` runs: builds the session from options, keeps it up where it can, reports results."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from arproj.devices import DeviceError, HeadFaults, HeadSimulator, PanTiltHead
+from arproj.session.output import BeamerWindow, FileOutput, MemoryOutput
+from arproj.session.wallmap import WallMap, load_wall_map, wall_map_from_wall_file
+from geometry.errors import InputError
+from geometry.rig import Rig
+
+
+@dataclass
+class SessionOptions:
+    map_path: Path | None = None
+    objects: Path | None = None
+    truth: Path | None = None
+    rig_dir: Path | None = None
+    sim: bool = False
+    seed: int = 0
+    wall_index: int = 0
+    distance: float = 2.5
+    incidence: float = 0.0
+    aim: tuple[float, float] | None = None
+    drill: tuple[float, float] | None = None
+    follow: list[tuple[float, float]] = field(default_factory=list)
+    cycles: int = 1
+    output: Path | None = None
+    window: bool = False
+    screen: int = 0
+    head_url: str | None = None
+    left: str = "0"
+    right: str = "1"
+    wall_prior: Path | None = None
+    head_fault: str | None = None
+    commands: Iterable[str] | None = None  # interactive: lines such as "aim 1.2,1.1", "drill 1.3,1.0", "update"
+
+
+class MultiOutput:
+    """Shows a frame on several outputs; an output that fails is dropped with a message, the rest go on."""
+
+    def __init__(self, outputs: list, say: Callable[[str], None]) -> None:
+        self.outputs = outputs
+        self.say = say
+
+    def show(self, frame: NDArray[np.uint8]) -> None:
+        for out in list(self.outputs):
+            try:
+                out.show(frame)
+            except InputError as err:
+                self.say(f"[yellow]warning:[/] {err} — that output is dropped, the session goes on")
+                self.outputs.remove(out)
+
+    def close(self) -> None:
+        for out in self.outputs:
+            out.close()
+
+
+def load_map(options: SessionOptions) -> WallMap:
+    if options.map_path is not None:
+        return load_wall_map(options.map_path, options.objects)
+    if options.truth is not None:
+        return wall_map_from_wall_file(options.truth)
+    raise InputError("no map given", "pass --map WALL.glb (from `arproj map`) or --truth WALL.yaml")
+
+
+def _head_faults(spec: str | None) -> HeadFaults:
+    if not spec:
+        return HeadFaults()
+    if spec == "dead":
+        return HeadFaults(dead=True)
+    if spec == "flaky":
+        return HeadFaults(drop_reply_rate=0.2, corrupt_reply_rate=0.1, garbage_rate=0.2, ignore_command_rate=0.1)
+    if spec.startswith("slip:"):
+        try:
+            pan, tilt = (float(v) for v in spec[5:].split(","))
+        except ValueError:
+            raise InputError(f"--head-fault {spec!r}: slip needs two angles, e.g. slip:0.3,0.0") from None
+        return HeadFaults(slip_deg=(pan, tilt))
+    raise InputError(f"--head-fault {spec!r} is unknown", "use dead, flaky or slip:PAN,TILT")
+
+
+def check_rig_matches(rig: Rig, cameras: dict) -> None:
+    """The rig's intrinsics must be for these cameras/projector (same image sizes)."""
+    for name, intr in cameras.items():
+        mine = rig.intrinsics.get(name)
+        if mine is not None and (mine.width, mine.height) != (intr.width, intr.height):
+            raise InputError(f"the rig file's {name} is {mine.width}x{mine.height} but the device delivers "
+                             f"{intr.width}x{intr.height}", "pass the rig calibrated for this robot (--rig)")
+
+
+def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> dict:
+    """Run the session as the options say; returns a JSON-able summary of every cycle."""
+    from arproj.session.robot_io import HardwareRobot, SimulatedRobot, nominal_rig
+    from arproj.session.session import ProjectionSession
+
+    wall_map = load_map(options)
+    outputs: list = []
+    memory = MemoryOutput()
+    outputs.append(memory)
+    if options.output is not None:
+        outputs.append(FileOutput(options.output))
+    rig = Rig.load(options.rig_dir) if options.rig_dir is not None else None
+    robot = None
+    site = None
+    ctx = None  # one GL context for the simulated site and the map renderer, released at the end
+    if options.window:
+        projector_size = (1280, 800) if rig is None else rig.intrinsics["projector"].size \
+            if "projector" in rig.intrinsics else (1280, 800)
+        try:
+            outputs.append(BeamerWindow(*projector_size, screen=options.screen))
+        except InputError as err:
+            say(f"[yellow]warning:[/] {err} — going on without the window" +
+                (f"; frames are written to {options.output}" if options.output else ""))
+    multi = MultiOutput(outputs, say)
+    try:
+        if options.sim:
+            from arproj.gl import create_context
+            from arproj.sim.site import Site
+
+            ctx = create_context()
+            site = Site.build(seed=options.seed, ctx=ctx, robot={"distance_m": options.distance,
+                                                        "incidence_deg": options.incidence,
+                                                        "wall": options.wall_index})
+            if rig is None:
+                rig = nominal_rig(site)
+                say("[yellow]note:[/] no --rig given: using the simulated robot's design values (uncalibrated); "
+                    "run `arproj calibrate --sim --out RIG` and pass --rig RIG for a calibrated rig")
+            check_rig_matches(rig, {"camera_left": site.camera_left, "camera_right": site.camera_right,
+                                    "projector": site.projector})
+            head_sim = HeadSimulator(faults=_head_faults(options.head_fault), seed=options.seed,
+                                     initial_deg=tuple(float(a) for a in site.head_angles_cmd_deg[:2]))
+            head = PanTiltHead(head_sim.url, timeout_s=0.1, retries=3, settle_timeout_s=3.0)
+            robot = SimulatedRobot(site, options.wall_index, head_sim, head, multi)
+        else:
+            if rig is None:
+                raise InputError("no rig given", "pass --rig RIG_DIR (from `arproj calibrate`), or --sim")
+            if options.wall_prior is None:
+                raise InputError("hardware sessions need --wall-prior FILE (T_wall_from_robot) until the "
+                                 "wall-pose package measures the in-plane position itself")
+            head = PanTiltHead(options.head_url) if options.head_url else None
+            robot = HardwareRobot(options.left, options.right, rig.intrinsics["camera_left"],
+                                  rig.intrinsics["camera_right"], multi, head, options.wall_prior)
+        return _run(ProjectionSession, rig, wall_map, robot, options, memory, say, ctx)
+    finally:
+        if robot is not None:
+            robot.close()
+        multi.close()
+        if site is not None:
+            site.release()
+        if ctx is not None:
+            ctx.release()
+
+
+def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options: SessionOptions,
+         memory: MemoryOutput, say: Callable[[str], None], ctx: object | None = None) -> dict:
+    result: dict = {"cycles": [], "map": wall_map.source, "rig": rig.quality.get("source", "rig file")
+                    if isinstance(rig.quality, dict) else "rig file",
+                    "frames": str(options.output) if options.output else None}
+    with session_cls(rig, wall_map, robot, ctx=ctx) as session:
+        x0, y0, x1, y1 = wall_map.extent
+        # --cycles 0: keep updating (re-estimate on motion, verify, show) until interrupted (Ctrl-C)
+        targets = options.follow or ([None] * options.cycles if options.cycles > 0 else itertools.repeat(None))
+        aim = options.aim if options.aim is not None else ((x0 + x1) / 2, (y0 + y1) / 2)
+        try:
+            session.aim_at(options.follow[0] if options.follow else aim)
+        except (DeviceError, InputError) as err:
+            say(f"[yellow]warning:[/] {err} — projecting from where the head is now")
+        if options.drill is not None:
+            session.set_drill_point(options.drill)
+        for k, target in enumerate(targets):
+            if target is not None:
+                session.set_drill_point(target)
+                if not _inside_image(session, target):
+                    try:
+                        session.aim_at(target)
+                    except (DeviceError, InputError) as err:
+                        say(f"[yellow]warning:[/] {err}")
+            decision = session.update()
+            cycle = {"cycle": k, "show_map": decision.show_map, "reasons": decision.reasons,
+                     "bound_mm": None if not np.isfinite(decision.bound_m) else round(decision.bound_m * 1000, 3)}
+            reg = session.registration
+            if reg is not None and reg.loop is not None and len(reg.loop.errors_xy):
+                e = np.linalg.norm(reg.loop.errors_xy, axis=1) * 1000
+                cycle["closed_loop_mm"] = {"seen": int(reg.loop.seen.sum()), "mean": float(e.mean()),
+                                           "p95": float(np.percentile(e, 95)),
+                                           "corrected": bool(np.any(reg.correction_xy != 0))}
+            if session.drill_xy is not None:
+                check = session.drill_check(session.drill_xy)
+                cycle["drill"] = {"xy": [round(float(v), 4) for v in session.drill_xy], "verdict": check.verdict,
+                                  "distance_mm": None if not np.isfinite(check.distance_m)
+                                  else round(check.distance_m * 1000, 1), "message": check.message}
+            result["cycles"].append(cycle)
+            say(f"cycle {k}: " + ("map shown" if decision.show_map else "WARNING: " + "; ".join(decision.reasons)))
+        if options.commands is not None:
+            _interactive(session, options.commands, result, say)
+        result["log"] = list(session.log)
+    return result
+
+
+COMMAND_HELP = ("commands: aim X,Y | drill X,Y | check X,Y | update | estimate (re-estimate now) | "
+                "status | quit")
+
+
+def _interactive(session: object, commands: Iterable[str], result: dict, say: Callable[[str], None]) -> None:
+    """Run typed commands; a bad command or a failing device is reported and the session goes on."""
+    say(COMMAND_HELP)
+    for line in commands:
+        words = line.strip().split(maxsplit=1)
+        if not words:
+            continue
+        verb, arg = words[0].lower(), (words[1] if len(words) > 1 else "")
+        try:
+            if verb in ("quit", "exit", "q"):
+                break
+            if verb == "aim":
+                x, y = (float(v) for v in arg.split(","))
+                session.aim_at((x, y))  # type: ignore[attr-defined]
+                verb = "update"
+            if verb == "drill":
+                x, y = (float(v) for v in arg.split(","))
+                check = session.set_drill_point((x, y))  # type: ignore[attr-defined]
+                say(f"drill point ({x:.3f}, {y:.3f}) m: {check.message}")
+                verb = "update"
+            if verb == "check":
+                x, y = (float(v) for v in arg.split(","))
+                say(f"({x:.3f}, {y:.3f}) m: {session.drill_check((x, y)).message}")  # type: ignore[attr-defined]
+            elif verb in ("update", "estimate"):
+                decision = session.update(force=verb == "estimate")  # type: ignore[attr-defined]
+                result["cycles"].append({"cycle": len(result["cycles"]), "show_map": decision.show_map,
+                                         "reasons": decision.reasons, "command": line.strip()})
+                say("map shown" if decision.show_map else "WARNING: " + "; ".join(decision.reasons))
+            elif verb == "status":
+                d = session.last_decision  # type: ignore[attr-defined]
+                say("no decision yet" if d is None else
+                    f"{'map shown' if d.show_map else 'warning'}; bound ±{d.bound_m * 1000:.1f} mm; "
+                    f"{'; '.join(session.log[-3:])}")  # type: ignore[attr-defined]
+            elif verb not in ("aim", "drill"):
+                say(f"unknown command {verb!r}; {COMMAND_HELP}")
+        except ValueError:
+            say(f"could not read {line.strip()!r}: points are X,Y in metres, e.g. aim 1.2,1.1")
+        except (InputError, DeviceError) as err:
+            say(f"[yellow]warning:[/] {err}")
+
+
+def _inside_image(session: object, xy: tuple[float, float], margin: float = 0.2) -> bool:
+    """Is wall point xy inside the inner part of the beamer's current image?"""
+    reg = session.registration  # type: ignore[attr-defined]
+    if reg is None:
+        return False
+    from geometry.poses import invert, transform_points
+
+    intr = session.projector_intr  # type: ignore[attr-defined]
+    from arproj.session.registration import project_in_view
+
+    p = transform_points(invert(reg.T_wall_from_projector), [xy[0], xy[1], 0.0])
+    return bool(project_in_view(intr, p[None], margin)[1][0])

@@ -1,0 +1,75 @@
+"""Ground truth of the registration on the simulated site: where the drawn features really land.
+
+A feature drawn for wall point w is rendered into the beamer frame at the session's belief of the projector
+pose; its centroid in that frame is a physical projector pixel, and the simulated site's exact ray casting
+(true intrinsics, true pose) says where on the wall that pixel lands. The distance to w is the true
+registration error of what the person sees.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from arproj.session import registration
+from geometry.poses import invert, transform_points
+
+MARK_SEPARATION_RADII = 4.0   # marks in one frame: centres at least this many (summed) radii apart
+MARK_RADIUS_PX = 2.5          # each mark covers at least this many projector pixels in radius
+MIN_MARK_RADIUS_M = 0.004
+
+
+def separated_passes(points_px: NDArray[np.float64], radii_px: NDArray[np.float64]) -> list[NDArray[np.int64]]:
+    """Split marks into groups (indices) in which every two are MARK_SEPARATION_RADII·(r_i + r_j) apart."""
+    remaining = list(range(len(points_px)))
+    passes = []
+    while remaining:
+        chosen: list[int] = []
+        rest = []
+        for i in remaining:
+            if all(np.linalg.norm(points_px[i] - points_px[j]) >= MARK_SEPARATION_RADII * (radii_px[i] + radii_px[j])
+                   for j in chosen):
+                chosen.append(i)
+            else:
+                rest.append(i)
+        passes.append(np.array(chosen, dtype=np.int64))
+        remaining = rest
+    return passes
+
+
+def true_landing_errors(session: object, site: object, marks_xy: NDArray[np.float64],
+                        wall_index: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Render marks at marks_xy (n, 2) with the session's current pose — each a disc of at least
+    MARK_RADIUS_PX projector pixels, drawn in passes of well separated marks — find their centroids in the
+    rendered frame and ray-cast those projector pixels with the site's truth.
+
+    Returns (errors (k,) metres, found projector pixels (k, 2)); marks not found or landing off the wall are
+    left out.
+    """
+    reg = session.registration  # type: ignore[attr-defined]
+    intr = session.projector_intr  # type: ignore[attr-defined]
+    marks_xy = np.asarray(marks_xy, dtype=np.float64)
+    p = transform_points(invert(reg.T_wall_from_projector), np.column_stack([marks_xy, np.zeros(len(marks_xy))]))
+    predicted, inside = registration.project_in_view(intr, p)
+    marks_xy, predicted = marks_xy[inside], predicted[inside]
+    step = registration.rays_to_wall(reg.T_wall_from_projector, intr,
+                                     np.concatenate([predicted, predicted + np.array([1.0, 0.0]),
+                                                     predicted + np.array([0.0, 1.0])]))[:, :2]
+    n = len(predicted)
+    footprint = np.maximum(np.linalg.norm(step[n:2 * n] - step[:n], axis=1),
+                           np.linalg.norm(step[2 * n:] - step[:n], axis=1))
+    radius_m = np.maximum(MIN_MARK_RADIUS_M, MARK_RADIUS_PX * footprint)
+    radius_px = radius_m / footprint
+    mp = session.map_projector  # type: ignore[attr-defined]
+    errors, pixels = [], []
+    for idx in separated_passes(predicted, radius_px):
+        mp.set_check_marks(marks_xy[idx], radius_m[idx])
+        frame = mp.render(reg.T_wall_from_projector)
+        found = registration.find_marks(frame, predicted[idx], radius_px[idx])
+        ok = np.all(np.isfinite(found), axis=1)
+        truth = site.raycast("projector", found[ok])  # type: ignore[attr-defined]
+        on_wall = np.asarray(truth.wall_index) == wall_index
+        landed = np.asarray(truth.wall_xy, dtype=np.float64)[on_wall]
+        errors.append(np.linalg.norm(landed - marks_xy[idx][ok][on_wall], axis=1))
+        pixels.append(found[ok][on_wall])
+    return np.concatenate(errors), np.concatenate(pixels)

@@ -1,0 +1,180 @@
+"""The safety gate: the map is shown only while the registration on the wall is believed within tolerance.
+
+Evidence comes from independent sources, so that each failure the gate must catch shows up in at least one:
+
+    wall-pose covariance (and its "not enough evidence")   pattern occluded, low contrast, few corners
+    head: reported vs commanded angles                      head stalled, lost command
+    closed loop: projected check marks triangulated by the  head slipped (encoder unaware), projector moved,
+    stereo pair vs where the model says they land           wrong or outdated rig file
+    stereo triangulation residual of those marks            wrong rig file (cameras disagree with it)
+    2D laser scan matched against the scan at estimation    robot moved (in-plane motion is invisible to
+                                                            the cameras: camera, projector and pattern move
+                                                            together)
+
+decide() turns them into a GateDecision: show the map, or the reasons why not.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from arproj.session import tolerances as tol
+from geometry.intrinsics import Intrinsics
+from geometry.poses import transform_points
+
+HEAD_COMMAND_TOLERANCE_DEG = 0.05
+ROBOT_MOTION_TOLERANCE_M = 0.003   # at the wall: translation plus heading change × distance
+STEREO_RESIDUAL_MAX_PX = 1.0       # RMS reprojection residual of triangulated check marks
+MIN_VISIBLE_FRACTION = 0.3         # fewer check marks seen than this fraction: pattern lost
+LASER_PLANE_TOLERANCE_M = 0.006    # laser and cameras disagree about the wall by more: wrong rig / moved camera
+SCAN_MATCH_NEIGHBOURS = 8
+SCAN_MATCH_MAX_PAIR_M = 0.15
+SCAN_MATCH_ITERATIONS = 12
+
+
+@dataclass
+class RegistrationEvidence:
+    """What the session knows about its registration now. Lengths in metres on the wall."""
+
+    pose_sigma_m: float | None = None
+    pose_failure: str | None = None
+    head_command_error_deg: float = 0.0
+    closed_loop_errors_m: NDArray[np.float64] | None = None  # (k,) per seen check mark
+    closed_loop_expected: int = 0
+    stereo_residual_px: float | None = None
+    robot_motion_m: float = 0.0
+    laser_plane_offset_m: float | None = None  # laser returns vs the camera-measured wall (rig/mount check)
+    head_failure: str | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass
+class GateDecision:
+    show_map: bool
+    reasons: list[str]
+    registration_sigma_m: float  # 1σ used for the safety bands
+    bound_m: float               # 95 % bound of the registration error compared with the tolerance
+
+
+def decide(ev: RegistrationEvidence, tolerance_m: float = tol.REGISTRATION_TOLERANCE_M) -> GateDecision:
+    reasons: list[str] = []
+    if ev.pose_failure:
+        reasons.append(f"wall pose unknown: {ev.pose_failure}")
+    if ev.pose_sigma_m is None and not ev.pose_failure:
+        reasons.append("wall pose not estimated yet")
+    if ev.head_failure:
+        reasons.append(f"head not answering: {ev.head_failure.split(' — ')[0]}")
+    if ev.head_command_error_deg > HEAD_COMMAND_TOLERANCE_DEG:
+        reasons.append(f"head not where commanded ({ev.head_command_error_deg:.2f}° off)")
+    if ev.robot_motion_m > ROBOT_MOTION_TOLERANCE_M:
+        reasons.append(f"robot moved {ev.robot_motion_m * 1000:.0f} mm since the wall pose was estimated")
+    sigma = ev.pose_sigma_m if ev.pose_sigma_m is not None else np.inf
+    loop_max = 0.0
+    if ev.closed_loop_expected > 0:
+        seen = 0 if ev.closed_loop_errors_m is None else len(ev.closed_loop_errors_m)
+        if seen < max(tol.CLOSED_LOOP_MIN_FEATURES, MIN_VISIBLE_FRACTION * ev.closed_loop_expected):
+            reasons.append(f"pattern lost: {seen} of {ev.closed_loop_expected} check marks seen")
+        elif ev.closed_loop_errors_m is not None:
+            loop_max = float(np.max(ev.closed_loop_errors_m))  # the worst mark: the map must hold everywhere
+            if loop_max > tolerance_m:
+                reasons.append(f"projection lands up to {loop_max * 1000:.0f} mm off where it should (head "
+                               "slipped, projector moved or wrong rig)")
+    if ev.laser_plane_offset_m is not None and np.isfinite(ev.laser_plane_offset_m) and \
+            ev.laser_plane_offset_m > LASER_PLANE_TOLERANCE_M:
+        reasons.append(f"laser and cameras disagree about the wall by {ev.laser_plane_offset_m * 1000:.0f} mm: "
+                       "wrong rig file or a camera moved?")
+    if ev.stereo_residual_px is not None and ev.stereo_residual_px > STEREO_RESIDUAL_MAX_PX:
+        reasons.append(f"cameras disagree with the rig file (residual {ev.stereo_residual_px:.1f} px): wrong "
+                       "or outdated rig?")
+    # The closed loop measures the projector against the camera-measured wall, so it cannot see an error of
+    # that wall estimate itself (both share it): its worst mark and the pose's 95 % error add up.
+    bound = tol.Z95 * sigma + loop_max + ev.robot_motion_m
+    if np.isfinite(bound) and bound > tolerance_m and not reasons:
+        reasons.append(f"registration uncertain: ±{bound * 1000:.1f} mm exceeds the {tolerance_m * 1000:.0f} mm "
+                       "tolerance")
+    registration_sigma = float(max(sigma, loop_max / tol.Z95)) if np.isfinite(sigma) else np.inf
+    return GateDecision(not reasons, reasons, registration_sigma, float(bound))
+
+
+# -- stereo triangulation of check marks ------------------------------------------------------------------
+def triangulate(left: Intrinsics, right: Intrinsics, T_right_from_left: NDArray[np.float64],
+                uv_left: NDArray[np.float64], uv_right: NDArray[np.float64]
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Points (n, 3) in the left camera frame from matched pixels (n, 2), and each one's RMS reprojection
+    residual (n,) in pixels (large when the rig file does not describe these cameras)."""
+    uv_left = np.asarray(uv_left, dtype=np.float64).reshape(-1, 2)
+    uv_right = np.asarray(uv_right, dtype=np.float64).reshape(-1, 2)
+    if len(uv_left) == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    xl = left.rays(uv_left)[:, :2]
+    xr = right.rays(uv_right)[:, :2]
+    P1 = np.hstack([np.eye(3), np.zeros((3, 1))])
+    P2 = np.asarray(T_right_from_left, dtype=np.float64)[:3, :]
+    X = cv2.triangulatePoints(P1, P2, xl.T, xr.T)
+    points = (X[:3] / X[3]).T
+    pl = left.project(points)
+    pr = right.project(transform_points(T_right_from_left, points))
+    residual = np.sqrt(0.5 * (np.sum((pl - uv_left) ** 2, axis=1) + np.sum((pr - uv_right) ** 2, axis=1)))
+    return points, residual
+
+
+# -- laser scan matching (robot moved?) -------------------------------------------------------------------
+@dataclass
+class ScanMotion:
+    """Motion of the robot between two 2D scans: the current scan's points map onto the reference by
+    (dx, dy, dtheta); rms_m the point-to-line residual; n pairs used."""
+
+    dx: float
+    dy: float
+    dtheta_rad: float
+    rms_m: float
+    n: int
+
+    def displacement_at(self, distance_m: float) -> float:
+        """Worst displacement (metres) of a point distance_m away caused by this motion."""
+        return float(np.hypot(self.dx, self.dy) + abs(self.dtheta_rad) * distance_m)
+
+
+def scan_motion(reference_xy: NDArray[np.float64], current_xy: NDArray[np.float64]) -> ScanMotion:
+    """Point-to-line ICP of current onto reference (both (n, 2), metres, robot frame at their time)."""
+    ref = np.asarray(reference_xy, dtype=np.float64).reshape(-1, 2)
+    cur = np.asarray(current_xy, dtype=np.float64).reshape(-1, 2)
+    ref = ref[np.all(np.isfinite(ref), axis=1)]
+    cur = cur[np.all(np.isfinite(cur), axis=1)]
+    if len(ref) < SCAN_MATCH_NEIGHBOURS or len(cur) < 3:
+        return ScanMotion(np.nan, np.nan, np.nan, np.nan, 0)
+    tree = cKDTree(ref)
+    _, nbr = tree.query(ref, k=SCAN_MATCH_NEIGHBOURS)
+    local = ref[nbr] - ref[nbr].mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", local, local)
+    _, vecs = np.linalg.eigh(cov)
+    normals = vecs[:, :, 0]  # smallest eigenvalue: across the wall
+    theta, t = 0.0, np.zeros(2)
+    rms, n = np.nan, 0
+    for _ in range(SCAN_MATCH_ITERATIONS):
+        c, s = np.cos(theta), np.sin(theta)
+        moved = cur @ np.array([[c, -s], [s, c]]).T + t
+        dist, idx = tree.query(moved)
+        keep = dist < SCAN_MATCH_MAX_PAIR_M
+        if keep.sum() < 3:
+            break
+        nrm = normals[idx[keep]]
+        p = moved[keep]
+        r = np.einsum("ij,ij->i", p - ref[idx[keep]], nrm)
+        # robust: drop pairs far beyond the typical residual (outlier beams)
+        mad = np.median(np.abs(r)) * 1.4826 + 1e-6
+        ok = np.abs(r) < 4 * mad + 0.005
+        J = np.column_stack([nrm[:, 0], nrm[:, 1], nrm[:, 0] * -p[:, 1] + nrm[:, 1] * p[:, 0]])[ok]
+        step, *_ = np.linalg.lstsq(J, -r[ok], rcond=None)
+        t = t + step[:2]
+        theta += step[2]
+        rms, n = float(np.sqrt(np.mean(r[ok] ** 2))), int(ok.sum())
+        if np.linalg.norm(step) < 1e-7:
+            break
+    # the current scan maps onto the reference by (theta, t): that is the robot's motion seen from the old pose
+    return ScanMotion(float(t[0]), float(t[1]), float(theta), rms, n)

@@ -1,0 +1,374 @@
+"""What is drawn on the wall: classes in distinct colours with a legend, safety bands, DIN 18015-3 zones and
+the drill-point check.
+
+Everything except the legend is rasterised in WALL coordinates into the texture of the projected mesh (so it
+is pre-warped by the renderer with the projector's exact intrinsics, pose and distortion); the legend and
+status text are drawn in the projector's own pixels, where text stays legible.
+
+Safety band of an object: half-width = width/2 + BASE_SAFETY_MARGIN + Z95 · sqrt(σ_map² + σ_registration²):
+its own size, a fixed margin for the drill, and a margin that grows with how well the object is mapped and
+how well the projection is registered.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from arproj.session import tolerances as tol
+from arproj.session.wallmap import MapObject, WallMap
+
+# Legend entries: (label, RGB colour, mapping classes drawn in that colour). Colours are bright (a projector
+# adds light; dark colours vanish on a lit wall) and differ in hue and lightness (Okabe–Ito inspired), so
+# red/green colour blindness still separates them; power lines are additionally hatched.
+LEGEND: tuple[tuple[str, tuple[int, int, int], tuple[str, ...]], ...] = (
+    ("power line / live", (255, 45, 45), ("power_line",)),
+    ("metal pipe", (40, 150, 255), ("metal_pipe",)),
+    ("other metal", (255, 215, 0), ("metal", "fastener")),
+    ("wood or stud", (0, 210, 140), ("wood",)),
+    ("cavity", (215, 120, 255), ("cavity",)),
+)
+CLASS_COLOR: dict[str, tuple[int, int, int]] = {c: colour for _, colour, classes in LEGEND for c in classes}
+# Drawing order: outlines under lines, power lines on top (the most dangerous object is never hidden).
+DRAW_ORDER = ("cavity", "wood", "fastener", "metal", "metal_pipe", "power_line")
+
+VERDICT_SAFE = "safe"
+VERDICT_KEEP_AWAY = "keep away"
+VERDICT_UNKNOWN = "unknown: not scanned"
+VERDICT_COLOR = {VERDICT_SAFE: (60, 255, 60), VERDICT_KEEP_AWAY: (255, 40, 40), VERDICT_UNKNOWN: (255, 200, 0)}
+
+
+def safety_margin_m(obj: MapObject, registration_sigma_m: float) -> float:
+    """Margin beyond the object's own half-width, metres."""
+    return tol.BASE_SAFETY_MARGIN_M + tol.Z95 * float(np.hypot(obj.sigma_m, registration_sigma_m))
+
+
+def band_half_width_m(obj: MapObject, registration_sigma_m: float) -> float:
+    """Half-width of the drawn band: the object's half-width plus its safety margin, metres."""
+    return 0.5 * obj.width_m + safety_margin_m(obj, registration_sigma_m)
+
+
+# -- DIN 18015-3 --------------------------------------------------------------------------------------------
+def din_zones(x0: float, y0: float, x1: float, y1: float, openings: list[tuple[float, float, float, float]]
+              | None = None, work_surface: bool = False) -> list[tuple[float, float, float, float]]:
+    """Installation zones (x0, y0, x1, y1) of DIN 18015-3 on a wall spanning x0…x1, floor y0, ceiling y1.
+
+    Horizontal zones 0.15–0.45 m below the ceiling and above the floor (and 0.90–1.30 m above the floor on
+    walls with work surfaces); vertical zones 0.10–0.30 m beside the wall's corners and beside each opening
+    (door, window: (x0, y0, x1, y1)), where electrical lines are to be laid. Lines may be anywhere in
+    practice — the zones say where to expect them, not where they are absent.
+    """
+    zones = [
+        (x0, y1 - tol.DIN_HORIZONTAL_TOP_FROM_CEILING_M[1], x1, y1 - tol.DIN_HORIZONTAL_TOP_FROM_CEILING_M[0]),
+        (x0, y0 + tol.DIN_HORIZONTAL_BOTTOM_FROM_FLOOR_M[0], x1, y0 + tol.DIN_HORIZONTAL_BOTTOM_FROM_FLOOR_M[1]),
+        (x0 + tol.DIN_VERTICAL_FROM_EDGE_M[0], y0, x0 + tol.DIN_VERTICAL_FROM_EDGE_M[1], y1),
+        (x1 - tol.DIN_VERTICAL_FROM_EDGE_M[1], y0, x1 - tol.DIN_VERTICAL_FROM_EDGE_M[0], y1),
+    ]
+    if work_surface:
+        zones.append((x0, y0 + tol.DIN_HORIZONTAL_MIDDLE_FROM_FLOOR_M[0], x1,
+                      y0 + tol.DIN_HORIZONTAL_MIDDLE_FROM_FLOOR_M[1]))
+    for ox0, _oy0, ox1, oy1 in openings or []:
+        near, far = tol.DIN_VERTICAL_FROM_EDGE_M
+        zones += [(ox0 - far, y0, ox0 - near, y1), (ox1 + near, y0, ox1 + far, y1)]
+        zones.append((ox0 - far, oy1 + near, ox1 + far, oy1 + far))  # above the opening
+    return zones
+
+
+# -- wall raster ----------------------------------------------------------------------------------------------
+@dataclass
+class WallRaster:
+    """An RGBA image laid over the wall: texel (row, col) covers x0 + col/s … and y1 - row/s … (s = px_per_m)."""
+
+    image: NDArray[np.uint8]
+    x0: float
+    y1: float
+    px_per_m: float
+
+    @property
+    def width_m(self) -> float:
+        return self.image.shape[1] / self.px_per_m
+
+    @property
+    def height_m(self) -> float:
+        return self.image.shape[0] / self.px_per_m
+
+    def to_px(self, xy: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Wall (x, y) metres → (col, row) pixel-centre coordinates, as cv2 drawing takes them."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        return np.column_stack([(xy[:, 0] - self.x0) * self.px_per_m - 0.5,
+                                (self.y1 - xy[:, 1]) * self.px_per_m - 0.5])
+
+    def uv(self, xy: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Texture coordinates (trimesh convention: v up) of wall points (n, 2)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        return np.column_stack([(xy[:, 0] - self.x0) / self.width_m,
+                                1.0 - (self.y1 - xy[:, 1]) / self.height_m])
+
+
+def empty_raster(extent: tuple[float, float, float, float], px_per_m: float = tol.OVERLAY_PX_PER_M) -> WallRaster:
+    x0, y0, x1, y1 = extent
+    px_per_m = min(px_per_m, tol.OVERLAY_MAX_TEXELS / max(x1 - x0, y1 - y0, 1e-6))
+    w = max(1, int(np.ceil((x1 - x0) * px_per_m)))
+    h = max(1, int(np.ceil((y1 - y0) * px_per_m)))
+    return WallRaster(np.zeros((h, w, 4), dtype=np.uint8), x0, y1, px_per_m)
+
+
+def scanned_mask(wall_map: WallMap, raster: WallRaster) -> NDArray[np.bool_]:
+    """(h, w) True where the wall was scanned: objects.json's polygons, else the map texture's alpha, else all."""
+    h, w = raster.image.shape[:2]
+    if wall_map.scanned:
+        mask = np.zeros((h, w), dtype=np.uint8)
+        polys = [np.round(raster.to_px(p) * 16).astype(np.int32) for p in wall_map.scanned]
+        cv2.fillPoly(mask, polys, 1, lineType=cv2.LINE_8, shift=4)
+        return mask.astype(bool)
+    if wall_map.texture is not None and wall_map.uv_from_xy is not None:
+        return _sample_map_texture(wall_map, raster)[..., 3] > 0
+    return np.ones((h, w), dtype=bool)
+
+
+def _sample_map_texture(wall_map: WallMap, raster: WallRaster) -> NDArray[np.uint8]:
+    """The mapping's RGBA texture resampled onto the raster's texels (nearest: alpha marks coverage)."""
+    assert wall_map.texture is not None and wall_map.uv_from_xy is not None
+    h, w = raster.image.shape[:2]
+    cols, rows = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    x = raster.x0 + (cols + 0.5) / raster.px_per_m
+    y = raster.y1 - (rows + 0.5) / raster.px_per_m
+    A = wall_map.uv_from_xy
+    u = A[0, 0] * x + A[0, 1] * y + A[0, 2]
+    v = A[1, 0] * x + A[1, 1] * y + A[1, 2]
+    th, tw = wall_map.texture.shape[:2]
+    map_x = (u * tw - 0.5).astype(np.float32)
+    map_y = ((1.0 - v) * th - 0.5).astype(np.float32)
+    return cv2.remap(wall_map.texture, map_x, map_y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                     borderValue=(0, 0, 0, 0))
+
+
+def _blend(image: NDArray[np.uint8], layer: NDArray[np.uint8], mask: NDArray[np.bool_], opacity: float) -> None:
+    rgb = image[..., :3]
+    rgb[mask] = (rgb[mask] * (1.0 - opacity) + layer[mask] * opacity).astype(np.uint8)
+    image[..., 3][mask] = 255
+
+
+def _hatch(shape: tuple[int, int], period_px: int) -> NDArray[np.bool_]:
+    rows, cols = np.indices(shape)
+    return ((rows + cols) % period_px) < period_px // 2
+
+
+def draw_map(wall_map: WallMap, registration_sigma_m: float, drill_xy: NDArray[np.float64] | None = None,
+             show_zones: bool = True, px_per_m: float = tol.OVERLAY_PX_PER_M,
+             clip: NDArray[np.float64] | None = None) -> WallRaster:
+    """The projected picture in wall coordinates: dimmed map texture, DIN zones where unscanned, safety bands
+    (margin at half brightness, the object itself at full colour), and the drill point in its verdict colour."""
+    raster = empty_raster(wall_map.extent, px_per_m)
+    img = raster.image
+    h, w = img.shape[:2]
+    s = raster.px_per_m
+    if wall_map.texture is not None and wall_map.uv_from_xy is not None:
+        sampled = _sample_map_texture(wall_map, raster)
+        alpha = sampled[..., 3:4].astype(np.float32) / 255.0 * tol.MAP_LAYER_OPACITY  # the map's own alpha
+        img[..., :3] = (img[..., :3] * (1.0 - alpha) + sampled[..., :3] * alpha).astype(np.uint8)
+        img[..., 3][sampled[..., 3] > 0] = 255
+    if show_zones:
+        unscanned = ~scanned_mask(wall_map, raster)
+        zone_mask = np.zeros((h, w), dtype=np.uint8)
+        for zx0, zy0, zx1, zy1 in din_zones(*wall_map.extent):
+            (c0, r0), (c1, r1) = raster.to_px(np.array([[zx0, zy1], [zx1, zy0]]))
+            cv2.rectangle(zone_mask, (round(c0), round(r0)), (round(c1), round(r1)), 1, -1)
+        zone = zone_mask.astype(bool) & unscanned & _hatch((h, w), max(4, int(0.04 * s)))
+        _blend(img, np.full((h, w, 3), 255, np.uint8), zone, tol.DIN_ZONE_OPACITY)
+    for kind in DRAW_ORDER:
+        for obj in (o for o in wall_map.objects if o.kind == kind):
+            _draw_object(img, raster, obj, registration_sigma_m)
+    if drill_xy is not None:
+        check = check_drill_point(wall_map, drill_xy, registration_sigma_m)
+        colour = VERDICT_COLOR[check.verdict]
+        c = raster.to_px(drill_xy)[0]
+        r = 0.03 * s
+        th = max(2, round(0.004 * s))
+        for d in ((r, 0), (0, r)):
+            p0 = (round(c[0] - d[0]), round(c[1] - d[1]))
+            p1 = (round(c[0] + d[0]), round(c[1] + d[1]))
+            cv2.line(img, p0, p1, (*colour, 255), th, cv2.LINE_AA)
+        cv2.circle(img, (round(c[0]), round(c[1])), round(0.6 * r), (*colour, 255), th,
+                   cv2.LINE_AA)
+    if clip is not None:  # only the well-registered part is shown, its edge outlined in grey
+        inside = np.zeros((h, w), dtype=np.uint8)
+        poly = np.round(raster.to_px(clip) * 16).astype(np.int32).reshape(-1, 1, 2)
+        cv2.fillPoly(inside, [poly], 1, shift=4)
+        img[inside == 0] = 0
+        cv2.polylines(img, [poly], True, (110, 110, 110, 255), max(2, round(0.004 * s)), cv2.LINE_AA, shift=4)
+    return raster
+
+
+def _distance_field(raster: WallRaster, obj: MapObject, reach_m: float) -> NDArray[np.float32]:
+    """Distance (h, w) in metres from every texel centre to the object's centre line, point or outline
+    edge (inf beyond reach_m of it): exact, so band edges are where the safety margin says, to half a texel."""
+    h, w = raster.image.shape[:2]
+    field = np.full((h, w), np.inf, dtype=np.float32)
+    pts = obj.points_m
+    segments = np.concatenate([pts, pts[:1]]) if obj.is_outline else pts
+    pairs = [(segments[i], segments[i + 1]) for i in range(len(segments) - 1)] or [(pts[0], pts[0])]
+    s = raster.px_per_m
+    for a, b in pairs:
+        lo = np.minimum(a, b) - reach_m
+        hi = np.maximum(a, b) + reach_m
+        c0 = max(0, int(np.floor((lo[0] - raster.x0) * s)))
+        c1 = min(w, int(np.ceil((hi[0] - raster.x0) * s)) + 1)
+        r0 = max(0, int(np.floor((raster.y1 - hi[1]) * s)))
+        r1 = min(h, int(np.ceil((raster.y1 - lo[1]) * s)) + 1)
+        if c0 >= c1 or r0 >= r1:
+            continue
+        x = raster.x0 + (np.arange(c0, c1) + 0.5) / s
+        y = raster.y1 - (np.arange(r0, r1) + 0.5) / s
+        px, py = np.meshgrid(x - a[0], y - a[1])
+        ab = b - a
+        t = np.clip((px * ab[0] + py * ab[1]) / max(float(ab @ ab), 1e-18), 0.0, 1.0)
+        d = np.hypot(px - t * ab[0], py - t * ab[1]).astype(np.float32)
+        np.minimum(field[r0:r1, c0:c1], d, out=field[r0:r1, c0:c1])
+    return field
+
+
+def _paint(img: NDArray[np.uint8], mask: NDArray[np.bool_], colour: tuple[int, ...]) -> None:
+    img[mask] = (*colour, 255)
+
+
+def _draw_object(img: NDArray[np.uint8], raster: WallRaster, obj: MapObject, registration_sigma_m: float
+                 ) -> None:
+    s = raster.px_per_m
+    colour = CLASS_COLOR[obj.kind]
+    margin_colour = tuple(int(0.5 * c) for c in colour)
+    band = band_half_width_m(obj, registration_sigma_m)
+    d = _distance_field(raster, obj, band + 2.0 / s)
+    if obj.is_outline:
+        _paint(img, d <= band - 0.5 * obj.width_m, margin_colour)
+        inside = np.zeros(img.shape[:2], dtype=np.uint8)
+        pts = np.round(raster.to_px(obj.points_m) * 16).astype(np.int32).reshape(-1, 1, 2)
+        cv2.fillPoly(inside, [pts], 1, shift=4)
+        hatch = inside.astype(bool) & _hatch(inside.shape, max(6, int(0.05 * s)))
+        _blend(img, np.full((*inside.shape, 3), colour, np.uint8), hatch, 0.5)
+        _paint(img, d <= max(0.5 * obj.width_m, 2.0 / s), colour)
+        return
+    _paint(img, d <= band, margin_colour)
+    if obj.kind == "power_line":  # hatch the margin too: "live" must not rely on colour alone
+        _paint(img, (d <= band) & _hatch(d.shape, max(6, int(0.02 * s))), tuple(int(0.8 * c) for c in colour))
+    _paint(img, d <= max(0.5 * obj.width_m, 1.0 / s), colour)
+
+
+# -- drill-point check ----------------------------------------------------------------------------------------
+@dataclass
+class DrillCheck:
+    """verdict: safe / keep away / unknown: not scanned; distance_m: from the point to the nearest object's
+    edge (0 inside it; inf when the map has none); clearance_m: distance minus that object's safety margin."""
+
+    verdict: str
+    distance_m: float
+    clearance_m: float
+    nearest: MapObject | None
+    scanned: bool
+
+    @property
+    def message(self) -> str:
+        if self.nearest is None:
+            where = "no mapped object"
+        else:
+            where = f"{self.distance_m * 1000:.0f} mm from the nearest {self.nearest.kind.replace('_', ' ')}"
+        return f"{self.verdict} ({where})"
+
+
+def distance_to_object_m(obj: MapObject, xy: NDArray[np.float64]) -> float:
+    """Distance (metres) from wall point xy (2,) to the object's edge; 0 on or inside it."""
+    p = np.asarray(xy, dtype=np.float64).reshape(2)
+    pts = obj.points_m
+    if obj.is_outline:
+        inside = cv2.pointPolygonTest(pts.astype(np.float32).reshape(-1, 1, 2), (float(p[0]), float(p[1])), True)
+        return max(0.0, -float(inside))
+    if len(pts) == 1:
+        centre_distance = float(np.linalg.norm(p - pts[0]))
+    else:
+        a, b = pts[:-1], pts[1:]
+        ab = b - a
+        t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18), 0, 1)
+        centre_distance = float(np.min(np.linalg.norm(a + t[:, None] * ab - p, axis=1)))
+    return max(0.0, centre_distance - 0.5 * obj.width_m)
+
+
+def point_scanned(wall_map: WallMap, xy: NDArray[np.float64]) -> bool:
+    p = np.asarray(xy, dtype=np.float64).reshape(2)
+    if wall_map.scanned:
+        return any(cv2.pointPolygonTest(poly.astype(np.float32).reshape(-1, 1, 2), (float(p[0]), float(p[1])),
+                                        False) >= 0 for poly in wall_map.scanned)
+    if wall_map.texture is not None and wall_map.uv_from_xy is not None:
+        u, v = wall_map.uv_from_xy @ np.array([p[0], p[1], 1.0])
+        th, tw = wall_map.texture.shape[:2]
+        col, row = int(np.floor(u * tw)), int(np.floor((1.0 - v) * th))
+        return 0 <= col < tw and 0 <= row < th and wall_map.texture[row, col, 3] > 0
+    x0, y0, x1, y1 = wall_map.extent
+    return bool(x0 <= p[0] <= x1 and y0 <= p[1] <= y1)
+
+
+def check_drill_point(wall_map: WallMap, xy: NDArray[np.float64], registration_sigma_m: float,
+                      drill_radius_m: float = 0.004) -> DrillCheck:
+    """Verdict for drilling at wall point xy (metres): keep away when the hole (radius drill_radius_m) would
+    reach into any object's safety band, unknown where the wall was not scanned, else safe."""
+    best: tuple[float, float, MapObject | None] = (np.inf, np.inf, None)
+    for obj in wall_map.objects:
+        d = distance_to_object_m(obj, xy)
+        clearance = d - drill_radius_m - safety_margin_m(obj, registration_sigma_m)
+        if clearance < best[1]:
+            best = (d, clearance, obj)
+    distance, clearance, nearest = best
+    scanned = point_scanned(wall_map, xy)
+    if clearance < 0:
+        verdict = VERDICT_KEEP_AWAY
+    elif not scanned:
+        verdict = VERDICT_UNKNOWN
+    else:
+        verdict = VERDICT_SAFE
+    return DrillCheck(verdict, float(distance), float(clearance), nearest, scanned)
+
+
+# -- projector-space parts: legend and status ---------------------------------------------------------------
+def draw_legend(frame: NDArray[np.uint8], lines: list[str] = (), corner: str = "top-left") -> NDArray[np.uint8]:
+    """Draws the class legend (and status lines) into an RGB frame (h, w, 3) in place; returns it."""
+    h, w = frame.shape[:2]
+    scale = max(0.45, min(w, h) / 1400.0)
+    thickness = max(1, round(scale * 2))
+    line_h = int(34 * scale)
+    entries = [(label, colour) for label, colour, _ in LEGEND] + [(text, (255, 255, 255)) for text in lines]
+    box_w = int(max(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness)[0][0] for t, _ in entries)
+                + 60 * scale)
+    box_h = line_h * len(entries) + int(12 * scale)
+    x = int(12 * scale) if "left" in corner else w - box_w - int(12 * scale)
+    y = int(12 * scale) if "top" in corner else h - box_h - int(12 * scale)
+    cv2.rectangle(frame, (x, y), (x + box_w, y + box_h), (30, 30, 30), -1)
+    for i, (text, colour) in enumerate(entries):
+        ty = y + int(8 * scale) + line_h * i
+        if i < len(LEGEND):
+            cv2.rectangle(frame, (x + int(8 * scale), ty + int(6 * scale)),
+                          (x + int(38 * scale), ty + line_h - int(6 * scale)), colour, -1)
+        cv2.putText(frame, text, (x + int(48 * scale), ty + line_h - int(9 * scale)), cv2.FONT_HERSHEY_SIMPLEX,
+                    scale, colour, thickness, cv2.LINE_AA)
+    return frame
+
+
+def warning_frame(width: int, height: int, reasons: list[str]) -> NDArray[np.uint8]:
+    """The frame projected instead of the map when the safety gate closes: a red-bordered warning."""
+    frame = np.zeros((height, width, 3), dtype=np.uint8)
+    border = max(8, min(width, height) // 40)
+    cv2.rectangle(frame, (border // 2, border // 2), (width - border // 2, height - border // 2),
+                  (255, 40, 40), border)
+    scale = max(0.6, min(width, height) / 500.0)
+    thickness = max(2, round(scale * 2))
+    lines = ["MAP HIDDEN: NOT REGISTERED", "Do not drill by this projection.", "", *reasons[:6]]
+    y = int(height * 0.25)
+    for i, text in enumerate(lines):
+        s = scale if i == 0 else scale * 0.55
+        t = thickness if i == 0 else max(1, thickness // 2)
+        size = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, s, t)[0]
+        colour = (255, 60, 60) if i == 0 else (255, 230, 120)
+        cv2.putText(frame, text, ((width - size[0]) // 2, y), cv2.FONT_HERSHEY_SIMPLEX, s, colour, t, cv2.LINE_AA)
+        y += int(size[1] * 2.0) + 4
+    return frame

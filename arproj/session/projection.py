@@ -1,0 +1,97 @@
+"""The pre-warped beamer frame: the in-wall map drawn on the wall mesh, seen from the projector.
+
+The overlays are rasterised in wall coordinates (overlays.draw_map) and become the texture of the mapping's
+mesh; the lead's MeshRenderer then draws that mesh with the projector's exact intrinsics (lens shift and
+distortion included) from T_wall_from_projector. Because the mesh is rendered — not warped by a homography —
+room corners and other non-planar walls land right too.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+from numpy.typing import ArrayLike, NDArray
+from PIL import Image
+
+from arproj.render import MeshRenderer
+from arproj.session import overlays
+from arproj.session import tolerances as tol
+from arproj.session.wallmap import WallMap
+from geometry.intrinsics import Intrinsics
+
+SIGMA_QUANTUM_M = 0.0005  # bands are redrawn when the registration σ changes by this much, not every frame
+CHECK_MARK_RADIUS_M = 0.008
+
+
+def textured_mesh(wall_map: WallMap, raster: overlays.WallRaster) -> trimesh.Trimesh:
+    """The map's mesh with UVs that put the raster at the vertices' wall (x, y)."""
+    mesh = wall_map.mesh
+    uv = raster.uv(np.asarray(mesh.vertices)[:, :2])
+    material = trimesh.visual.material.SimpleMaterial(image=Image.fromarray(raster.image, "RGBA"))
+    return trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=False,
+                           visual=trimesh.visual.TextureVisuals(uv=uv, material=material))
+
+
+def check_mark_raster(wall_map: WallMap, marks_xy: NDArray[np.float64],
+                      radius_m: float | NDArray[np.float64] = CHECK_MARK_RADIUS_M) -> overlays.WallRaster:
+    """White discs on black at wall points marks_xy (n, 2) (radius per mark or one for all): the closed
+    loop's check frame."""
+    import cv2
+
+    raster = overlays.empty_raster(wall_map.extent)
+    centres = raster.to_px(marks_xy)
+    radii = np.broadcast_to(np.asarray(radius_m, dtype=np.float64), (len(centres),)) * raster.px_per_m
+    for c, r in zip(centres, radii, strict=True):
+        cv2.circle(raster.image, (round(c[0] * 16), round(c[1] * 16)), round(r * 16),
+                   (255, 255, 255, 255), -1, cv2.LINE_AA, shift=4)
+    return raster
+
+
+class MapProjector:
+    """Renders beamer frames of a wall map. Owns a MeshRenderer; use as a context manager."""
+
+    def __init__(self, wall_map: WallMap, projector: Intrinsics, ctx: object | None = None) -> None:
+        self.wall_map = wall_map
+        self.projector = projector
+        self._renderer = MeshRenderer(ctx=ctx)  # type: ignore[arg-type]
+        self._key: tuple | None = None
+        self.raster: overlays.WallRaster | None = None
+
+    def __enter__(self) -> MapProjector:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    def release(self) -> None:
+        self._renderer.release()
+
+    def set_overlays(self, registration_sigma_m: float, drill_xy: ArrayLike | None = None,
+                     show_zones: bool = True, clip: NDArray[np.float64] | None = None) -> None:
+        """(Re)draw the wall texture when what it shows changed (σ is quantised so jitter does not redraw).
+        clip: polygon (k, 2) wall metres outside which nothing is drawn (the trusted region)."""
+        sigma_q = round(float(registration_sigma_m) / SIGMA_QUANTUM_M) * SIGMA_QUANTUM_M
+        drill = None if drill_xy is None else tuple(np.round(np.asarray(drill_xy, dtype=float), 4))
+        clip_key = None if clip is None else np.asarray(clip).round(3).tobytes()
+        key = ("map", sigma_q, drill, show_zones, clip_key)
+        if key == self._key:
+            return
+        self.raster = overlays.draw_map(self.wall_map, sigma_q, None if drill is None else np.array(drill),
+                                        show_zones, clip=clip)
+        self._renderer.set_mesh(textured_mesh(self.wall_map, self.raster))
+        self._key = key
+
+    def set_check_marks(self, marks_xy: NDArray[np.float64],
+                        radius_m: float | NDArray[np.float64] = CHECK_MARK_RADIUS_M) -> None:
+        key = ("marks", np.asarray(marks_xy).round(5).tobytes(), np.asarray(radius_m).round(5).tobytes())
+        if key == self._key:
+            return
+        self.raster = check_mark_raster(self.wall_map, marks_xy, radius_m)
+        self._renderer.set_mesh(textured_mesh(self.wall_map, self.raster))
+        self._key = key
+
+    def render(self, T_wall_from_projector: ArrayLike) -> NDArray[np.uint8]:
+        """The pre-warped frame (h, w, 3) uint8 RGB for the projector at T_wall_from_projector."""
+        if self._key is None:
+            self.set_overlays(tol.DEFAULT_MAP_SIGMA_M)
+        return self._renderer.render(self.projector, T_wall_from_projector).color

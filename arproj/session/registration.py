@@ -1,0 +1,332 @@
+"""Registration of the projection to the wall: the wall frame from the measured plane, the projector's pose
+in it, the expected error on the wall, and the closed loop (check marks photographed and triangulated).
+
+Conventions: T_wall_from_robot maps robot points into the wall frame (x along the wall, y up, z into the
+room); the plane estimate (arproj.wallpose) gives the wall's normal and distance in the robot frame and the
+projector's measured pose T_camera_left_from_projector.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from arproj.session import gate
+from arproj.session import tolerances as tol
+from geometry.intrinsics import Intrinsics
+from geometry.poses import invert, make_pose, transform_points
+
+MARK_MIN_CAMERA_PX = 3.5       # check-mark radius as seen by a camera, at least
+MARK_SEARCH_FACTOR = 3.0       # search window radius, in mark radii
+MARK_MIN_CONTRAST = 12.0       # grey levels a mark must stand out from its surroundings
+
+
+def snap_to_plane(T_wall_from_robot_prior: NDArray[np.float64], normal_robot: NDArray[np.float64],
+                  distance: float) -> NDArray[np.float64]:
+    """The prior wall frame moved onto the measured plane (n·X + d = 0 in the robot frame, n into the room).
+
+    The plane fixes 3 degrees of freedom (tilt of the wall, distance); the prior keeps the other three
+    (position along the wall, height, rotation about the normal), as measured by localization, laser or
+    the wall's edges.
+    """
+    T_robot_from_wall = invert(T_wall_from_robot_prior)
+    n = np.asarray(normal_robot, dtype=np.float64) / np.linalg.norm(normal_robot)
+    y = T_robot_from_wall[:3, 1] - (T_robot_from_wall[:3, 1] @ n) * n
+    y /= np.linalg.norm(y)
+    x = np.cross(y, n)
+    origin = T_robot_from_wall[:3, 3]
+    origin = origin - (n @ origin + distance) * n
+    return invert(make_pose(np.column_stack([x, y, n]), origin))
+
+
+def incidence_deg(T_wall_from_projector: NDArray[np.float64]) -> float:
+    """Angle between the projector's optical axis and the wall's normal."""
+    axis = T_wall_from_projector[:3, 2]
+    return float(np.degrees(np.arccos(min(1.0, abs(axis[2]) / np.linalg.norm(axis)))))
+
+
+def aim_point_on_wall(T_wall_from_projector: NDArray[np.float64], projector: Intrinsics,
+                      pixel: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+    """Wall (x, y, 0) hit by a projector pixel (default: the image centre)."""
+    px = np.array([[(projector.width - 1) / 2, (projector.height - 1) / 2]]) if pixel is None else pixel
+    return rays_to_wall(T_wall_from_projector, projector, np.asarray(px, dtype=float).reshape(-1, 2))[0]
+
+
+def rays_to_wall(T_wall_from_projector: NDArray[np.float64], projector: Intrinsics,
+                 pixels: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Wall points (n, 3) (z = 0) where projector pixels (n, 2) land; NaN behind the projector."""
+    pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    if len(pixels) == 0:
+        return np.zeros((0, 3))
+    rays = projector.rays(pixels) @ T_wall_from_projector[:3, :3].T
+    origin = T_wall_from_projector[:3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -origin[2] / rays[:, 2]
+    t = np.where(t > 0, t, np.nan)
+    return origin + t[:, None] * rays
+
+
+def project_in_view(intr: Intrinsics, points_cam: NDArray[np.float64], margin: float = 0.0
+                    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Pixels (n, 2) of camera-frame points and which of them are truly in view (inside the image shrunk by
+    margin, a fraction of its size). Points far outside the field of view can be folded back into the image
+    by the distortion polynomial; they are recognised by their pinhole projection and reported outside."""
+    p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
+    front = p[:, 2] > 1e-6
+    safe = np.where(front[:, None], p, [0.0, 0.0, 1.0])
+    uv = intr.project(safe)
+    pinhole = intr.without_distortion().project(safe)
+    w, h = intr.width, intr.height
+    lo_u, hi_u, lo_v, hi_v = margin * w - 0.5, (1 - margin) * w - 0.5, margin * h - 0.5, (1 - margin) * h - 0.5
+    inside = front & (uv[:, 0] > lo_u) & (uv[:, 0] < hi_u) & (uv[:, 1] > lo_v) & (uv[:, 1] < hi_v)
+    # the pinhole image of an in-view point lies within the distortion's reach of the image (50 % slack)
+    inside &= (pinhole[:, 0] > -0.5 * w) & (pinhole[:, 0] < 1.5 * w) & (pinhole[:, 1] > -0.5 * h) \
+        & (pinhole[:, 1] < 1.5 * h)
+    if intr.has_distortion and inside.any():
+        # and undistorting its pixel gives back its own ray (no fold-over)
+        rays = intr.rays(uv[inside])
+        direct = safe[inside, :2] / safe[inside, 2:3]
+        inside[np.flatnonzero(inside)] = np.linalg.norm(rays[:, :2] - direct, axis=1) < 1e-6
+    return uv, inside
+
+
+def pixel_footprint_m(T_wall_from_projector: NDArray[np.float64], projector: Intrinsics,
+                      pixel: NDArray[np.float64] | None = None) -> float:
+    """Size of one projector pixel on the wall (metres): the longer side of its footprint."""
+    px = np.array([(projector.width - 1) / 2, (projector.height - 1) / 2]) if pixel is None else pixel
+    steps = np.array([px, px + np.array([1.0, 0.0]), px + np.array([0.0, 1.0])])
+    pts = rays_to_wall(T_wall_from_projector, projector, steps)
+    return float(max(np.linalg.norm(pts[1] - pts[0]), np.linalg.norm(pts[2] - pts[0])))
+
+
+def local_registration_sigma_m(centre_distance_95_m: float, normal_95_deg: float,
+                               T_wall_from_projector: NDArray[np.float64], points_xy: NDArray[np.float64],
+                               centre_xy: NDArray[np.float64], in_plane_sigma_m: float, footprint_m: float,
+                               calibration_px: float, roll_sigma_rad: float = 0.0) -> NDArray[np.float64]:
+    """1σ registration error on the wall (metres) at each drawn point points_xy (n, 2).
+
+    A plane offset δd slides a point's landing along the wall by δd·tan(i), i the local incidence of the
+    projector's ray there; a tilt δθ about the pattern's centre lifts a point r away by r·δθ, which slides by
+    r·δθ·tan(i); a rotation about the normal moves it by r·δφ; plus the in-plane position's σ and the
+    calibration's residual (projector pixels × footprint). On an
+    oblique wall the far end of the image is much less certain than the part near the aim point.
+    """
+    pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    rays = np.column_stack([pts, np.zeros(len(pts))]) - T_wall_from_projector[:3, 3]
+    cos_i = np.abs(rays[:, 2]) / np.linalg.norm(rays, axis=1)
+    tan_i = np.tan(np.minimum(np.arccos(np.clip(cos_i, 0.0, 1.0)), np.radians(80.0)))
+    lever = np.linalg.norm(pts - np.asarray(centre_xy, dtype=np.float64)[:2], axis=1)
+    s_offset = centre_distance_95_m / tol.Z95 * tan_i
+    s_normal = lever * np.radians(normal_95_deg) / np.sqrt(5.991) * tan_i
+    s_calib = calibration_px * footprint_m
+    s_roll = lever * roll_sigma_rad
+    return np.sqrt(s_offset ** 2 + s_normal ** 2 + in_plane_sigma_m ** 2 + s_calib ** 2 + s_roll ** 2)
+
+
+def inside_polygon(points_xy: NDArray[np.float64], polygon: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """(n,) which wall points lie inside (or on) a polygon (k, 2)."""
+    contour = np.asarray(polygon, dtype=np.float32).reshape(-1, 1, 2)
+    return np.array([cv2.pointPolygonTest(contour, (float(x), float(y)), False) >= 0
+                     for x, y in np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)], dtype=bool)
+
+
+@dataclass
+class TrustedRegion:
+    """Where the map may be drawn: polygon (k, 2) wall metres, or None for everywhere it lands; sigma_m the
+    largest expected 1σ error inside; share the fraction of the drawn area's sample points inside."""
+
+    polygon: NDArray[np.float64] | None
+    sigma_m: float
+    share: float
+
+    @property
+    def usable(self) -> bool:
+        return self.share >= tol.MIN_TRUSTED_SHARE
+
+
+def trusted_region(points_xy: NDArray[np.float64], sigma_m: NDArray[np.float64], tolerance_m: float
+                   ) -> TrustedRegion:
+    """The part of the drawn area where the registration is within tolerance (95 %, with a reserve for what
+    the closed loop may add): the convex hull of the trusted sample points (the error grows smoothly away
+    from the aim point, so that region is convex in practice)."""
+    if len(sigma_m) == 0:
+        return TrustedRegion(None, float("inf"), 0.0)
+    ok = tol.Z95 * sigma_m <= tol.TRUSTED_FRACTION_OF_TOLERANCE * tolerance_m
+    share = float(ok.mean())
+    if ok.all():
+        return TrustedRegion(None, float(sigma_m.max()), 1.0)
+    if ok.sum() < 3:
+        return TrustedRegion(None, float(sigma_m.max()), share)
+    hull = cv2.convexHull(points_xy[ok].astype(np.float32)).reshape(-1, 2).astype(np.float64)
+    return TrustedRegion(hull, float(sigma_m[ok].max()), share)
+
+
+# -- closed loop --------------------------------------------------------------------------------------------
+def choose_marks(T_wall_from_projector: NDArray[np.float64], projector: Intrinsics,
+                 extent: tuple[float, float, float, float], grid: tuple[int, int] = (8, 6),
+                 border: float = 0.06) -> NDArray[np.float64]:
+    """Wall points (n, 2) for check marks: a grid over the projector image's inner part, kept on the map."""
+    gx = np.linspace(border, 1 - border, grid[0]) * (projector.width - 1)
+    gy = np.linspace(border, 1 - border, grid[1]) * (projector.height - 1)
+    px = np.array([[x, y] for y in gy for x in gx])
+    wall = rays_to_wall(T_wall_from_projector, projector, px)[:, :2]
+    x0, y0, x1, y1 = extent
+    ok = np.all(np.isfinite(wall), axis=1) & (wall[:, 0] > x0) & (wall[:, 0] < x1) & (wall[:, 1] > y0) \
+        & (wall[:, 1] < y1)
+    return wall[ok]
+
+
+def mark_radius_m(distance_m: float, camera: Intrinsics) -> float:
+    return max(0.006, MARK_MIN_CAMERA_PX * distance_m / camera.fx)
+
+
+def find_marks(image: NDArray[np.uint8], predicted_uv: NDArray[np.float64],
+               radius_px: float | NDArray[np.float64]) -> NDArray[np.float64]:
+    """Sub-pixel centres (n, 2) of bright marks near their predicted pixels; NaN where none stands out.
+
+    Background-subtracted, intensity-weighted centroid in a window around the prediction, re-centred twice.
+    """
+    gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    g = gray.astype(np.float32)
+    h, w = g.shape
+    radii = np.broadcast_to(np.asarray(radius_px, dtype=np.float64), (len(predicted_uv),))
+    out = np.full((len(predicted_uv), 2), np.nan)
+    for k, (u, v) in enumerate(np.asarray(predicted_uv, dtype=np.float64)):
+        if not (np.isfinite(u) and np.isfinite(v)):
+            continue
+        win = int(np.ceil(MARK_SEARCH_FACTOR * radii[k])) + 2
+        cu, cv_ = u, v
+        for _ in range(3):
+            c0, c1 = round(cu) - win, round(cu) + win + 1
+            r0, r1 = round(cv_) - win, round(cv_) + win + 1
+            if c0 < 0 or r0 < 0 or c1 > w or r1 > h:
+                break
+            patch = g[r0:r1, c0:c1]
+            background = float(np.percentile(patch, 40))
+            weight = np.clip(patch - background, 0, None)
+            peak = float(weight.max())
+            if peak < MARK_MIN_CONTRAST:
+                break
+            weight[weight < 0.25 * peak] = 0.0  # only the mark, not the texture around it
+            rows, cols = np.mgrid[r0:r1, c0:c1]
+            total = weight.sum()
+            new_u, new_v = float((weight * cols).sum() / total), float((weight * rows).sum() / total)
+            if abs(new_u - cu) < 0.01 and abs(new_v - cv_) < 0.01:
+                cu, cv_ = new_u, new_v
+                out[k] = (cu, cv_)
+                break
+            cu, cv_ = new_u, new_v
+            out[k] = (cu, cv_)
+    return out
+
+
+@dataclass
+class ClosedLoopResult:
+    """errors_xy: (k, 2) metres, where each used mark landed minus where it should (wall x, y); seen: (n,)
+    marks found in both cameras and kept; offset_xy: mean error (the correction applied when small);
+    residual_px: stereo RMS residual; off_plane_m: median left/right disagreement on the wall."""
+
+    marks_xy: NDArray[np.float64]
+    errors_xy: NDArray[np.float64]
+    seen: NDArray[np.bool_]
+    residual_px: float
+    off_plane_m: float
+
+    @property
+    def errors_m(self) -> NDArray[np.float64]:
+        return np.linalg.norm(self.errors_xy, axis=1)
+
+    @property
+    def offset_xy(self) -> NDArray[np.float64]:
+        return self.errors_xy.mean(axis=0) if len(self.errors_xy) else np.zeros(2)
+
+    def summary(self) -> str:
+        if not len(self.errors_xy):
+            return f"closed loop: 0 of {len(self.seen)} check marks seen"
+        e = self.errors_m * 1000
+        return (f"closed loop: {self.seen.sum()} of {len(self.seen)} marks, error mean {e.mean():.2f} mm, "
+                f"p95 {np.percentile(e, 95):.2f} mm, stereo residual {self.residual_px:.2f} px")
+
+
+def predict_camera_pixels(marks_xy: NDArray[np.float64], T_wall_from_robot: NDArray[np.float64],
+                          T_robot_from_camera: NDArray[np.float64], camera: Intrinsics) -> NDArray[np.float64]:
+    points_wall = np.column_stack([marks_xy, np.zeros(len(marks_xy))])
+    p_cam = transform_points(invert(T_wall_from_robot @ T_robot_from_camera), points_wall)
+    uv = camera.project(p_cam)
+    behind = p_cam[:, 2] <= 0
+    uv[behind] = np.nan
+    return uv
+
+
+MARK_MAX_RESIDUAL_PX = 1.0      # a mark whose two views do not meet within this was mis-detected
+MARK_MAX_DISAGREEMENT_M = 0.004  # … or whose left and right landing points differ by more
+
+
+def _ray_plane_xy(camera: Intrinsics, uv: NDArray[np.float64], T_wall_from_camera: NDArray[np.float64]
+                  ) -> NDArray[np.float64]:
+    """Wall (x, y) where each camera pixel's ray meets the wall plane z = 0."""
+    return rays_to_wall(T_wall_from_camera, camera, uv)[:, :2]
+
+
+def measure_marks(marks_xy: NDArray[np.float64], uv_left: NDArray[np.float64], uv_right: NDArray[np.float64],
+                  camera_left: Intrinsics, camera_right: Intrinsics, T_right_from_left: NDArray[np.float64],
+                  T_wall_from_camera_left: NDArray[np.float64]) -> ClosedLoopResult:
+    """Where the found marks (NaN rows: not found) landed, compared with marks_xy.
+
+    Each camera's ray is intersected with the measured wall plane (known from hundreds of pattern corners):
+    on an oblique wall that is far more precise in the plane than free stereo triangulation, whose depth
+    error slides along the wall by tan(incidence). The mean of both cameras is the landing point; a mark
+    whose stereo reprojection residual or left/right disagreement is too large was mis-detected and is
+    dropped. residual_px (RMS over all marks seen by both cameras) checks the rig: a wrong rig file makes
+    every mark's rays miss each other.
+    """
+    seen = np.all(np.isfinite(uv_left), axis=1) & np.all(np.isfinite(uv_right), axis=1)
+    _, residual = gate.triangulate(camera_left, camera_right, T_right_from_left, uv_left[seen], uv_right[seen])
+    rms = float(np.sqrt(np.mean(residual ** 2))) if len(residual) else float("nan")
+    T_wall_from_right = T_wall_from_camera_left @ invert(T_right_from_left)
+    xy_l = _ray_plane_xy(camera_left, uv_left[seen], T_wall_from_camera_left)
+    xy_r = _ray_plane_xy(camera_right, uv_right[seen], T_wall_from_right)
+    disagreement = np.linalg.norm(xy_l - xy_r, axis=1)
+    good = (residual <= max(MARK_MAX_RESIDUAL_PX, 3.0 * np.median(residual) if len(residual) else 0.0)) \
+        & (disagreement <= MARK_MAX_DISAGREEMENT_M) & np.all(np.isfinite(xy_l + xy_r), axis=1)
+    if rms > gate.STEREO_RESIDUAL_MAX_PX:
+        good[:] = True  # the rig itself is in doubt: keep everything, the gate will say so
+    kept = np.flatnonzero(seen)[good]
+    used = np.zeros(len(marks_xy), dtype=bool)
+    used[kept] = True
+    errors = 0.5 * (xy_l[good] + xy_r[good]) - marks_xy[kept]
+    off_plane = float(np.median(disagreement[good])) if good.any() else float("nan")
+    return ClosedLoopResult(marks_xy, errors, used, rms, off_plane)
+
+
+LASER_NEAR_WALL_M = 0.08     # laser returns this close to the estimated wall plane belong to it
+LASER_WINDOW_M = 1.5         # … and this far along the wall from the projected area
+LASER_MIN_POINTS = 20
+
+
+def laser_plane_offset_m(T_wall_from_robot: NDArray[np.float64], laser_points_robot: NDArray[np.float64],
+                         centre_x: float) -> float:
+    """How far (metres) the 2D laser's returns from this wall lie off the wall frame the cameras measured,
+    near the projected area: the offset at centre_x plus the slope over LASER_WINDOW_M (robust line fit).
+
+    Camera-measured plane and laser both live in the robot frame, so a camera mount that differs from the rig
+    file (or a bumped camera) shows up here; NaN when the laser does not see this wall.
+    """
+    p = np.asarray(laser_points_robot, dtype=np.float64)
+    if p.shape[1] == 2:
+        raise ValueError("laser points need their height: pass (n, 3) robot-frame points")
+    w = transform_points(T_wall_from_robot, p)
+    near = (np.abs(w[:, 2]) < LASER_NEAR_WALL_M) & (np.abs(w[:, 0] - centre_x) < LASER_WINDOW_M)
+    if near.sum() < LASER_MIN_POINTS:
+        return float("nan")
+    x, z = w[near, 0] - centre_x, w[near, 2]
+    keep = np.ones(len(z), dtype=bool)
+    for _ in range(3):  # line fit with outlier rejection (laser outliers return short ranges)
+        A = np.column_stack([np.ones(keep.sum()), x[keep]])
+        (a, b), *_ = np.linalg.lstsq(A, z[keep], rcond=None)
+        r = z - (a + b * x)
+        keep = np.abs(r) < max(3.0 * 1.4826 * np.median(np.abs(r[keep])), 0.005)
+    return float(abs(a) + abs(b) * LASER_WINDOW_M)

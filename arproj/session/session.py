@@ -1,0 +1,365 @@
+"""The projection session at the drilling site.
+
+    session = ProjectionSession(rig, wall_map, robot)
+    session.aim_at([1.2, 1.1])        # turn the head so the beamer's image is centred on that wall point
+    decision = session.update()       # estimate the wall pose if needed, verify, show map or warning
+    session.set_drill_point([1.25, 1.0]); session.update()
+
+Each update: (1) triggers — no registration yet, the head reports other angles than at the estimate, the
+laser says the robot moved — re-estimate the wall pose from the projected pattern; (2) the closed loop
+projects check marks, photographs them with both cameras, measures where they landed and corrects a small
+remaining offset (a large one triggers one re-estimate); (3) the safety gate decides: the pre-warped map with
+the legend, or a warning that says why.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import least_squares
+
+from arproj.devices import DeviceError
+from arproj.session import gate, overlays, registration
+from arproj.session import tolerances as tol
+from arproj.session.projection import MapProjector
+from arproj.session.robot_io import RobotIO
+from arproj.session.wallmap import WallMap
+from arproj.wallpose.estimate import PlaneEstimate, Uncertainty, estimate_plane
+from arproj.wallpose.pattern import choose_pattern
+from arproj.wallpose.pose import estimate_wall_pose
+from arproj.wallpose.rig import ViewRig
+from geometry.errors import InputError
+from geometry.poses import invert, make_pose, transform_points
+from geometry.rig import Rig
+
+HEAD_MOVED_DEG = 0.005  # reported angles that differ by more than this since the estimate: re-estimate
+CLOSED_LOOP_MARKS = 48  # check marks per closed-loop frame
+HEAD_MODEL_FALLBACK_DEG = 10.0  # projector-pose prior when the head model disagrees with the pattern
+HEAD_MODEL_FALLBACK_M = 0.05
+
+
+@dataclass
+class Registration:
+    """The current belief of where the projector is relative to the wall."""
+
+    head_deg: tuple[float, float]
+    T_wall_from_robot: NDArray[np.float64]
+    T_wall_from_projector: NDArray[np.float64]   # with the closed loop's correction applied
+    plane: PlaneEstimate
+    sigma_m: float
+    prior_source: str
+    distance_m: float
+    incidence_deg: float
+    footprint_m: float
+    reference_scan: NDArray[np.float64] | None = None   # (n, 3) robot frame, at the estimate
+    laser_plane_offset_m: float | None = None
+    trusted: registration.TrustedRegion | None = None  # where the map is drawn (None: everywhere)
+    loop: registration.ClosedLoopResult | None = None
+    correction_xy: NDArray[np.float64] = field(default_factory=lambda: np.zeros(2))
+    estimated_at: float = field(default_factory=time.monotonic)
+
+
+def _quality(rig: Rig, section: str, key: str) -> float:
+    """A calibration quality figure from rig.yaml (0 when the rig does not record it)."""
+    value = rig.quality.get(section, {}).get(key) if isinstance(rig.quality, dict) else None
+    try:
+        return float(value) if value is not None else 0.0
+    except (TypeError, ValueError):
+        return 0.0
+
+
+def check_rig(rig: Rig) -> None:
+    """The rig must have what the session needs (InputError naming what is missing)."""
+    for device in ("camera_left", "camera_right", "projector"):
+        if device not in rig.intrinsics:
+            raise InputError(f"rig has no intrinsics for {device}", "run `arproj calibrate` for this robot")
+    for name in ("T_robot_from_camera_left", "T_camera_right_from_camera_left"):
+        rig.pose(name)
+    if rig.head is None:
+        raise InputError("rig has no head model", "calibrate the pan/tilt head (`arproj calibrate`)")
+
+
+class ProjectionSession:
+    """Aims, registers, verifies and shows the in-wall map. Owns a MapProjector (GL); use `with`."""
+
+    def __init__(self, rig: Rig, wall_map: WallMap, robot: RobotIO, ctx: object | None = None,
+                 tolerance_m: float = tol.REGISTRATION_TOLERANCE_M, closed_loop: bool = True) -> None:
+        check_rig(rig)
+        self.rig = rig
+        self.wall_map = wall_map
+        self.robot = robot
+        self.tolerance_m = tolerance_m
+        self.closed_loop = closed_loop
+        self.projector_intr = rig.intrinsics["projector"]
+        self.map_projector = MapProjector(wall_map, self.projector_intr, ctx)
+        self.registration: Registration | None = None
+        self.pose_failure: str | None = None
+        self.head_failure: str | None = None
+        self.drill_xy: NDArray[np.float64] | None = None
+        self.last_decision: gate.GateDecision | None = None
+        self.last_evidence: gate.RegistrationEvidence | None = None
+        self.last_frame: NDArray[np.uint8] | None = None
+        self.last_pattern_capture: tuple | None = None  # (pattern, left image, right image, head angles)
+        self.log: list[str] = []
+
+    def __enter__(self) -> ProjectionSession:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self.map_projector.release()
+
+    # -- head -----------------------------------------------------------------------------------------------
+    def head_deg(self) -> tuple[float, float]:
+        """The head's reported (pan, tilt); when it does not answer, the last known angles (and the gate is
+        told, so the map is not shown as if the head were confirmed in place)."""
+        if self.robot.head is None:
+            return (0.0, 0.0) if self.registration is None else self.registration.head_deg
+        try:
+            angles = self.robot.head.position()
+        except DeviceError as err:
+            self.head_failure = str(err)
+            if self.registration is not None:
+                return self.registration.head_deg
+            return self.robot.head.commanded or (0.0, 0.0)
+        self.head_failure = None
+        return angles
+
+    def T_robot_from_projector_model(self, head_deg: tuple[float, float]) -> NDArray[np.float64]:
+        assert self.rig.head is not None
+        return self.rig.head.T_robot_from_projector([head_deg[0], head_deg[1], 0.0])
+
+    def _wall_from_robot(self) -> NDArray[np.float64]:
+        if self.registration is not None:
+            return self.registration.T_wall_from_robot
+        return self.robot.wall_prior()[0]
+
+    def aim_at(self, wall_xy: ArrayLike) -> tuple[float, float]:
+        """Turn the head so the centre of the beamer's image lands on wall point (x, y) metres; re-register."""
+        if self.robot.head is None:
+            raise InputError("this session has no pan/tilt head to aim with", "pass --head URL or --sim")
+        xy = np.asarray(wall_xy, dtype=np.float64).reshape(2)
+        target = transform_points(invert(self._wall_from_robot()), [xy[0], xy[1], 0.0])
+        intr = self.projector_intr
+        centre_ray = intr.rays([[(intr.width - 1) / 2, (intr.height - 1) / 2]])[0]
+
+        def residual(pt: NDArray[np.float64]) -> NDArray[np.float64]:
+            p = transform_points(invert(self.T_robot_from_projector_model((pt[0], pt[1]))), target)
+            return p[:2] / max(p[2], 1e-6) - centre_ray[:2]
+
+        start = np.asarray(self.head_deg(), dtype=np.float64)
+        sol = least_squares(residual, start, x_scale=10.0)
+        if np.max(np.abs(sol.fun)) > 1e-4:
+            raise InputError(f"the head cannot aim at wall point ({xy[0]:.2f}, {xy[1]:.2f}) m",
+                             "pick a point the beamer can reach from here, or move the robot")
+        pan, tilt = (float(a) for a in sol.x)
+        self.robot.head.move_to(pan, tilt)
+        self.log.append(f"aimed at ({xy[0]:.3f}, {xy[1]:.3f}) m: pan {pan:.2f}°, tilt {tilt:.2f}°")
+        self.registration = None  # the head moved: the old registration no longer holds
+        return pan, tilt
+
+    def set_drill_point(self, wall_xy: ArrayLike | None) -> overlays.DrillCheck | None:
+        self.drill_xy = None if wall_xy is None else np.asarray(wall_xy, dtype=np.float64).reshape(2)
+        return None if self.drill_xy is None else self.drill_check(self.drill_xy)
+
+    def drill_check(self, wall_xy: ArrayLike) -> overlays.DrillCheck:
+        sigma = self.last_decision.registration_sigma_m if self.last_decision else np.inf
+        sigma = sigma if np.isfinite(sigma) else self.tolerance_m / tol.Z95
+        return overlays.check_drill_point(self.wall_map, np.asarray(wall_xy, dtype=np.float64), sigma)
+
+    # -- registration ---------------------------------------------------------------------------------------
+    def _uncertainty(self) -> Uncertainty:
+        """How well the head model predicts the projector's pose: the estimator's prior, never tighter than the
+        head's repeatability, wider when the head calibration's residual says so (3σ of its RMS)."""
+        rot = max(Uncertainty().projector_rotation_deg, 3.0 * _quality(self.rig, "head", "rotation_rms_deg"))
+        trans = max(Uncertainty().projector_translation_m, 3e-3 * _quality(self.rig, "head", "position_rms_mm"))
+        return Uncertainty(projector_rotation_deg=rot, projector_translation_m=trans)
+
+    def estimate(self) -> Registration | None:
+        """Project the pattern, estimate the wall plane and the projector's pose; None (and pose_failure set)
+        when the pictures do not support a trustworthy pose."""
+        head = self.head_deg()
+        views = ViewRig.from_rig(self.rig, [head[0], head[1], 0.0])
+        prior, in_plane_sigma, source = self.robot.wall_prior()
+        T_wall_from_projector_prior = prior @ views.T_robot_from_projector
+        n_p = invert(T_wall_from_projector_prior)[:3, :3] @ np.array([0.0, 0.0, 1.0])
+        distance_guess = float(np.clip(T_wall_from_projector_prior[2, 3] / max(-n_p[2], 0.05), 0.3, 15.0))
+        incidence_guess = float(np.degrees(np.arctan2(-n_p[0], -n_p[2])))
+        self.registration = None
+        try:
+            pattern = choose_pattern(views, distance_guess, incidence_guess)
+            left, right = self.robot.capture(pattern.image())
+            self.last_pattern_capture = (pattern, left, right, head)
+            try:
+                plane = estimate_plane(left, right, pattern, views, uncertainty=self._uncertainty())
+            except InputError as err:
+                if getattr(err, "code", None) != "views_disagree" or "projector pose" not in err.message:
+                    raise
+                # The head model misplaces the projector (head re-mounted, head calibration off): measure the
+                # projector's pose from the pattern itself; the closed loop and the gate still judge the result.
+                plane = estimate_plane(left, right, pattern, views, uncertainty=Uncertainty(
+                    projector_rotation_deg=HEAD_MODEL_FALLBACK_DEG, projector_translation_m=HEAD_MODEL_FALLBACK_M))
+                self.log.append(f"head model disagrees with the pattern (projector "
+                                f"{plane.projector_correction_deg:.2f}° / {plane.projector_correction_m * 1000:.1f} mm "
+                                "off): its pose was measured from the pattern instead — recalibrate the head")
+        except InputError as err:  # the estimator's "not enough evidence" (or pictures that do not fit the rig)
+            self.pose_failure = err.message.replace("not enough evidence for the wall pose: ", "")
+            self.log.append(f"wall pose: {self.pose_failure}")
+            return None
+        T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
+        scan = self.robot.laser_points()
+        roll_sigma_rad = 0.0
+        full = getattr(self.robot, "full_pose_inputs", lambda: None)()
+        if full is not None:  # the wall-pose package fuses plane, localization, floor and laser scan
+            room, wall_index, localized, loc_m, loc_deg = full
+            try:
+                pose = estimate_wall_pose(plane, wall_index, room, localized, T_robot_from_projector, scan, loc_m,
+                                          loc_deg)
+            except InputError as err:
+                self.pose_failure = err.message.replace("not enough evidence for the wall pose: ", "")
+                self.log.append(f"wall pose: {self.pose_failure}")
+                return None
+            T_wall_from_robot = pose.T_wall_from_robot
+            in_plane_sigma = float(np.hypot(pose.sigma_along_m, pose.sigma_height_m))
+            roll_sigma_rad = float(np.radians(pose.sigma_roll_deg))
+            source = "wall pose (" + ", ".join(pose.sources) + ")"
+        else:
+            T_wall_from_robot = registration.snap_to_plane(prior, plane.normal, plane.distance)
+        self.pose_failure = None
+        T_wall_from_projector = T_wall_from_robot @ T_robot_from_projector
+        aim = registration.aim_point_on_wall(T_wall_from_projector, self.projector_intr)
+        distance = float(np.linalg.norm(aim - T_wall_from_projector[:3, 3]))
+        inc = registration.incidence_deg(T_wall_from_projector)
+        footprint = registration.pixel_footprint_m(T_wall_from_projector, self.projector_intr)
+        calib_px = _quality(self.rig, "projector", "rms_px")
+        # where the map is drawn (on the map and in the image) and how well each part is registered there
+        drawn = registration.choose_marks(T_wall_from_projector, self.projector_intr, self.wall_map.extent,
+                                          grid=(16, 10), border=0.02)
+        local = registration.local_registration_sigma_m(
+            plane.centre_distance_95_m, plane.normal_95_deg, T_wall_from_projector, drawn, aim[:2],
+            in_plane_sigma, footprint, calib_px, roll_sigma_rad)
+        trusted = registration.trusted_region(drawn, local, self.tolerance_m)
+        sigma = trusted.sigma_m if trusted.usable else (float(local.max()) if len(local) else float("inf"))
+        laser_offset = None if scan is None else registration.laser_plane_offset_m(T_wall_from_robot, scan, aim[0])
+        self.registration = Registration(head, T_wall_from_robot, T_wall_from_projector, plane, sigma, source,
+                                         distance, inc, footprint, scan, laser_offset, trusted)
+        self.log.append(f"wall pose: {plane.corners} corners, σ {sigma * 1000:.2f} mm on the wall, "
+                        f"{distance:.2f} m at {inc:.0f}°, in-plane from {source}")
+        return self.registration
+
+    def verify(self) -> registration.ClosedLoopResult | None:
+        """The closed loop: project check marks, photograph them, measure where they landed, correct a small
+        mean offset. Returns the measurement (errors before the correction)."""
+        reg = self.registration
+        if reg is None:
+            return None
+        cam_l, cam_r = self.rig.intrinsics["camera_left"], self.rig.intrinsics["camera_right"]
+        T_robot_from_left = self.rig.pose("T_robot_from_camera_left")
+        T_right_from_left = self.rig.pose("T_camera_right_from_camera_left")
+        T_wall_uncorrected = make_pose(None, [-reg.correction_xy[0], -reg.correction_xy[1], 0.0]) \
+            @ reg.T_wall_from_projector
+        marks = registration.choose_marks(T_wall_uncorrected, self.projector_intr, self.wall_map.extent)
+        if reg.trusted is not None and reg.trusted.polygon is not None:  # verify what is shown, not the rest
+            dense = registration.choose_marks(T_wall_uncorrected, self.projector_intr, self.wall_map.extent,
+                                              grid=(16, 10))
+            dense = dense[registration.inside_polygon(dense, reg.trusted.polygon)]
+            step = max(1, int(np.ceil(len(dense) / CLOSED_LOOP_MARKS)))
+            marks = dense[::step]  # as many marks as usual, spread over the trusted part
+        if len(marks) < tol.CLOSED_LOOP_MIN_FEATURES:
+            reg.loop = registration.ClosedLoopResult(marks, np.zeros((0, 2)), np.zeros(len(marks), bool),
+                                                     float("nan"), float("nan"))
+            return reg.loop
+        radius_m = registration.mark_radius_m(reg.distance_m, cam_l)
+        self.map_projector.set_check_marks(marks, radius_m)
+        frame = self.map_projector.render(T_wall_uncorrected)
+        left, right = self.robot.capture(frame)
+        T_robot_from_right = T_robot_from_left @ invert(T_right_from_left)
+        uv_l = registration.predict_camera_pixels(marks, reg.T_wall_from_robot, T_robot_from_left, cam_l)
+        uv_r = registration.predict_camera_pixels(marks, reg.T_wall_from_robot, T_robot_from_right, cam_r)
+        r_px = radius_m * cam_l.fx / reg.distance_m
+        found_l = registration.find_marks(left, uv_l, r_px)
+        found_r = registration.find_marks(right, uv_r, r_px)
+        loop = registration.measure_marks(marks, found_l, found_r, cam_l, cam_r, T_right_from_left,
+                                          reg.T_wall_from_robot @ T_robot_from_left)
+        reg.loop = loop
+        offset = loop.offset_xy
+        if loop.seen.sum() >= tol.CLOSED_LOOP_MIN_FEATURES and np.linalg.norm(offset) <= \
+                tol.CLOSED_LOOP_MAX_CORRECTION_M:
+            # content drawn at c lands at c + offset: move the virtual projector by the offset (see README)
+            reg.correction_xy = offset
+            reg.T_wall_from_projector = make_pose(None, [offset[0], offset[1], 0.0]) @ T_wall_uncorrected
+        self.log.append(loop.summary())
+        return loop
+
+    # -- evidence, gate, frame ------------------------------------------------------------------------------
+    def evidence(self) -> gate.RegistrationEvidence:
+        reg = self.registration
+        ev = gate.RegistrationEvidence(pose_failure=self.pose_failure)
+        now = self.head_deg()
+        ev.head_failure = self.head_failure
+        if reg is None:
+            return ev
+        ev.pose_sigma_m = reg.sigma_m
+        ev.head_command_error_deg = float(max(abs(now[0] - reg.head_deg[0]), abs(now[1] - reg.head_deg[1])))
+        if reg.reference_scan is not None:
+            current = self.robot.laser_points()
+            if current is not None:
+                motion = gate.scan_motion(reg.reference_scan[:, :2], current[:, :2])
+                ev.robot_motion_m = motion.displacement_at(reg.distance_m) if motion.n else np.inf
+        ev.laser_plane_offset_m = reg.laser_plane_offset_m
+        if reg.loop is not None:
+            ev.closed_loop_expected = len(reg.loop.seen)
+            ev.closed_loop_errors_m = np.linalg.norm(reg.loop.errors_xy - reg.correction_xy, axis=1)
+            ev.stereo_residual_px = reg.loop.residual_px if reg.loop.seen.any() else None
+        return ev
+
+    def decide(self) -> gate.GateDecision:
+        self.last_evidence = self.evidence()
+        self.last_decision = gate.decide(self.last_evidence, self.tolerance_m)
+        return self.last_decision
+
+    def render_frame(self, decision: gate.GateDecision) -> NDArray[np.uint8]:
+        """The map (pre-warped, with legend and status) when the gate is open, else the warning."""
+        intr = self.projector_intr
+        if not decision.show_map or self.registration is None:
+            return overlays.warning_frame(intr.width, intr.height, decision.reasons)
+        trusted = self.registration.trusted
+        clip = None if trusted is None else trusted.polygon
+        self.map_projector.set_overlays(decision.registration_sigma_m, self.drill_xy, clip=clip)
+        frame = self.map_projector.render(self.registration.T_wall_from_projector).copy()
+        lines = [f"registered: ±{decision.bound_m * 1000:.1f} mm (95 %)"]
+        if clip is not None:
+            lines.append(f"map limited to the well-registered {100 * trusted.share:.0f} % (outlined)")
+        if self.drill_xy is not None:
+            lines.append(f"drill: {self.drill_check(self.drill_xy).message}")
+        return overlays.draw_legend(frame, lines)
+
+    def update(self, force: bool = False) -> gate.GateDecision:
+        """One cycle: re-estimate when needed, verify, decide, show. Returns the gate's decision."""
+        needs_estimate = force or self.registration is None
+        if not needs_estimate:
+            ev = self.evidence()
+            needs_estimate = ev.head_command_error_deg > HEAD_MOVED_DEG or \
+                ev.robot_motion_m > gate.ROBOT_MOTION_TOLERANCE_M
+            if needs_estimate:
+                self.log.append("head or robot moved: re-estimating the wall pose")
+        if needs_estimate:
+            self.estimate()
+        if self.closed_loop and self.registration is not None:
+            loop = self.verify()
+            if loop is not None and loop.seen.sum() >= tol.CLOSED_LOOP_MIN_FEATURES and \
+                    np.linalg.norm(loop.offset_xy) > tol.CLOSED_LOOP_MAX_CORRECTION_M and not needs_estimate:
+                self.log.append("projection landed off: re-estimating the wall pose")
+                if self.estimate() is not None:
+                    self.verify()
+        decision = self.decide()
+        self.last_frame = self.render_frame(decision)
+        self.robot.show(self.last_frame)
+        if not decision.show_map:
+            self.log.append("WARNING shown: " + "; ".join(decision.reasons))
+        return decision

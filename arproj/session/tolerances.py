@@ -1,0 +1,34 @@
+"""Numeric tolerances and defaults of the projection session, in one place (metres unless named _mm/_deg)."""
+
+from __future__ import annotations
+
+# Safety gate: a map is shown only while the registration error on the wall is believed (95 %) below this.
+REGISTRATION_TOLERANCE_M = 0.010
+# Safety band: drawn half-width = object half-width + BASE_MARGIN + Z95 · sqrt(σ_map² + σ_registration²).
+BASE_SAFETY_MARGIN_M = 0.010
+Z95 = 1.96
+DEFAULT_MAP_SIGMA_M = 0.003  # position σ of a mapped object when objects.json gives none (mapping's target)
+MIN_CONFIDENCE_FOR_SIGMA = 0.25  # σ_map grows as 1/confidence, down to this confidence
+
+# Overlay raster on the wall (texture of the projected mesh)
+OVERLAY_PX_PER_M = 500.0  # 2 mm per texel: below one projector pixel's footprint at 2 m
+OVERLAY_MAX_TEXELS = 4096  # per side (GL texture limit that llvmpipe and every GPU supports)
+MAP_LAYER_OPACITY = 0.45  # the mapping's own texture is drawn dimmer than the object bands
+
+# DIN 18015-3 installation zones for electrical lines (metres, from the finished floor / ceiling / corner)
+DIN_ZONE_WIDTH_M = 0.30
+DIN_HORIZONTAL_TOP_FROM_CEILING_M = (0.15, 0.45)
+DIN_HORIZONTAL_BOTTOM_FROM_FLOOR_M = (0.15, 0.45)
+DIN_HORIZONTAL_MIDDLE_FROM_FLOOR_M = (0.90, 1.30)  # only on walls with work surfaces (kitchens)
+DIN_VERTICAL_FROM_EDGE_M = (0.10, 0.30)  # beside wall corners, doors and windows
+DIN_ZONE_OPACITY = 0.18
+
+# Closed loop
+CLOSED_LOOP_MAX_CORRECTION_M = 0.006  # larger offsets are not "small": re-estimate instead of correcting
+CLOSED_LOOP_MIN_FEATURES = 6
+TRUTH_MAP_SIGMA_M = 0.0005  # a map taken from a wall file's truth is exact but for rounding
+
+# Trusted region: the map is drawn only where the expected registration error (95 %) is below this share of
+# the tolerance, and only when that covers at least this share of the drawn area
+TRUSTED_FRACTION_OF_TOLERANCE = 0.6  # the rest is left for what the closed loop measures
+MIN_TRUSTED_SHARE = 0.2

@@ -1,0 +1,216 @@
+"""The in-wall map the session projects: the mapping's mesh (wall.glb) and its objects (objects.json).
+
+    wall.glb      textured triangle mesh in the WALL frame (metres); its RGBA texture is the in-wall map,
+                  alpha 0 where the wall was not scanned
+    objects.json  {"objects": [{"class": "power_line", "points_m": [[x, y], …], "width_m": 0.01,
+                  "confidence": 0.97, "position_sigma_m": 0.002 (optional)}, …],
+                  "scanned_regions_m": [[[x, y], …], …] (optional polygons)}
+
+Classes are the mapping's: power_line, metal_pipe, metal, fastener, wood, cavity. Pipes and cables are
+polylines, fasteners single points, studs (wood) and cavities closed outlines.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from arproj.session import tolerances as tol
+from geometry.errors import InputError
+
+MAP_CLASSES = ("power_line", "metal_pipe", "metal", "fastener", "wood", "cavity")
+OUTLINE_CLASSES = ("wood", "cavity")
+
+
+@dataclass
+class MapObject:
+    """One mapped object in wall coordinates. points_m: (n, 2) float64, metres."""
+
+    kind: str
+    points_m: NDArray[np.float64]
+    width_m: float
+    confidence: float = 1.0
+    sigma_m: float = tol.DEFAULT_MAP_SIGMA_M
+
+    @property
+    def is_outline(self) -> bool:
+        return self.kind in OUTLINE_CLASSES and len(self.points_m) >= 3
+
+
+@dataclass
+class WallMap:
+    """mesh: in the wall frame (metres); texture: the mapping's RGBA map with the affine wall-xy → uv it uses
+    (uv_from_xy: (2, 3)); scanned: polygons (list of (n, 2)) where the wall was scanned."""
+
+    mesh: trimesh.Trimesh
+    objects: list[MapObject] = field(default_factory=list)
+    texture: NDArray[np.uint8] | None = None
+    uv_from_xy: NDArray[np.float64] | None = None
+    scanned: list[NDArray[np.float64]] = field(default_factory=list)
+    source: str = ""
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(x0, y0, x1, y1) of the mesh in wall coordinates, metres."""
+        lo, hi = self.mesh.bounds
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+
+
+def load_wall_map(glb_path: str | Path, objects_path: str | Path | None = None) -> WallMap:
+    """Read wall.glb and objects.json (default: beside the GLB). InputError names the file and the problem."""
+    glb_path = Path(glb_path)
+    if not glb_path.exists():
+        raise InputError(f"{glb_path}: no such map file", "pass the wall.glb written by `arproj map … --out DIR`")
+    try:
+        loaded = trimesh.load(glb_path, file_type="glb" if glb_path.suffix.lower() != ".gltf" else None,
+                              force=None)
+    except Exception as err:  # trimesh raises many exception types for bad files
+        raise InputError(f"{glb_path}: not a readable GLB mesh ({type(err).__name__}: {err})",
+                         "re-export it with `arproj map`") from None
+    mesh = _single_mesh(loaded, glb_path)
+    texture, uv_from_xy = _texture_and_uv_map(mesh, glb_path)
+    objects_path = Path(objects_path) if objects_path is not None else glb_path.with_name("objects.json")
+    objects, scanned = ([], []) if not objects_path.exists() else read_objects(objects_path)
+    # without scanned_regions_m, coverage comes from the texture's alpha (see overlays.scanned_mask)
+    return WallMap(mesh, objects, texture, uv_from_xy, scanned, source=str(glb_path))
+
+
+def read_objects(path: str | Path) -> tuple[list[MapObject], list[NDArray[np.float64]]]:
+    """objects.json → (objects, scanned polygons)."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such objects file") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise InputError(f"{path}: not valid JSON ({err})", "re-export it with `arproj map`") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("objects"), list):
+        raise InputError(f"{path}: expected {{\"objects\": [...]}}")
+    objects = []
+    for i, item in enumerate(doc["objects"]):
+        where = f"{path}: objects[{i}]"
+        if not isinstance(item, dict):
+            raise InputError(f"{where} is not an object")
+        kind = item.get("class")
+        if kind not in MAP_CLASSES:
+            raise InputError(f"{where}: class {kind!r} is unknown", f"use one of {', '.join(MAP_CLASSES)}")
+        try:
+            points = np.asarray(item["points_m"], dtype=np.float64).reshape(-1, 2)
+            width = float(item["width_m"])
+            confidence = float(item.get("confidence", 1.0))
+            sigma = item.get("position_sigma_m")
+        except KeyError as err:
+            raise InputError(f"{where}: key {err.args[0]!r} is missing") from None
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: points_m must be [[x, y], …] and width_m a number (metres)") from None
+        if len(points) == 0 or not np.all(np.isfinite(points)) or not (np.isfinite(width) and width >= 0):
+            raise InputError(f"{where}: needs at least one finite point and a width ≥ 0, got width_m={width}")
+        if sigma is None:
+            sigma = tol.DEFAULT_MAP_SIGMA_M / max(min(confidence, 1.0), tol.MIN_CONFIDENCE_FOR_SIGMA)
+        objects.append(MapObject(kind, points, width, confidence, float(sigma)))
+    scanned = []
+    for i, poly in enumerate(doc.get("scanned_regions_m") or []):
+        try:
+            p = np.asarray(poly, dtype=np.float64).reshape(-1, 2)
+        except (TypeError, ValueError):
+            raise InputError(f"{path}: scanned_regions_m[{i}] must be [[x, y], …]") from None
+        if len(p) < 3:
+            raise InputError(f"{path}: scanned_regions_m[{i}] needs at least 3 corners")
+        scanned.append(p)
+    return objects, scanned
+
+
+def write_objects(path: str | Path, objects: list[MapObject], scanned: list[NDArray[np.float64]] = ()) -> None:
+    """objects.json in the mapping's format (with position_sigma_m and scanned_regions_m)."""
+    doc = {"objects": [{"class": o.kind, "points_m": o.points_m.tolist(), "width_m": o.width_m,
+                        "confidence": o.confidence, "position_sigma_m": o.sigma_m} for o in objects]}
+    if len(scanned):
+        doc["scanned_regions_m"] = [np.asarray(p).tolist() for p in scanned]
+    Path(path).write_text(json.dumps(doc, indent=1))
+
+
+def plane_mesh(x0: float, y0: float, x1: float, y1: float) -> trimesh.Trimesh:
+    """A flat wall rectangle (two triangles) at z = 0 in the wall frame."""
+    vertices = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
+    return trimesh.Trimesh(vertices, np.array([[0, 1, 2], [0, 2, 3]]), process=False)
+
+
+def _single_mesh(loaded: object, path: Path) -> trimesh.Trimesh:
+    if isinstance(loaded, trimesh.Scene):
+        geometries = [g for g in loaded.dump(concatenate=False) if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+        if not geometries:
+            raise InputError(f"{path}: the GLB holds no triangle mesh", "re-export it with `arproj map`")
+        # One textured mesh is what the mapping exports; several are concatenated (textures then dropped).
+        mesh = geometries[0] if len(geometries) == 1 else trimesh.util.concatenate(geometries)
+    elif isinstance(loaded, trimesh.Trimesh):
+        mesh = loaded
+    else:
+        raise InputError(f"{path}: the GLB holds a {type(loaded).__name__}, not a triangle mesh")
+    if len(mesh.faces) == 0 or not np.all(np.isfinite(mesh.vertices)):
+        raise InputError(f"{path}: the mesh is empty or has non-finite vertices")
+    return mesh
+
+
+def _texture_and_uv_map(mesh: trimesh.Trimesh, path: Path
+                        ) -> tuple[NDArray[np.uint8] | None, NDArray[np.float64] | None]:
+    """The mesh's RGBA texture and the affine map wall (x, y) → uv it uses, when the UVs are affine in x, y."""
+    visual = mesh.visual
+    uv = getattr(visual, "uv", None)
+    if getattr(visual, "kind", None) != "texture" or uv is None:
+        return None, None
+    material = visual.material
+    image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
+    if image is None:
+        return None, None
+    rgba = np.asarray(image.convert("RGBA"), dtype=np.uint8)
+    xy1 = np.column_stack([mesh.vertices[:, :2], np.ones(len(mesh.vertices))])
+    A, *_ = np.linalg.lstsq(xy1, np.asarray(uv, dtype=np.float64), rcond=None)
+    residual = np.abs(xy1 @ A - uv).max() if len(uv) else np.inf
+    if not np.isfinite(residual) or residual > 1e-3:
+        raise InputError(f"{path}: the texture is not laid out in wall coordinates (uv not affine in x, y; "
+                         f"residual {residual:.3g})", "export the map with `arproj map`")
+    return rgba, A.T
+
+
+# Truth objects of a wall description file (scanner.wall) in the mapping's classes, for `--truth` and tests.
+def _class_of(obj: object) -> str:
+    kind, material = obj.kind, obj.material  # type: ignore[attr-defined]
+    if kind == "cable":
+        return "power_line" if obj.live else "metal"  # type: ignore[attr-defined]
+    if kind == "pipe":
+        return "metal_pipe"  # plastic pipes too: the legend's "pipe" colour is what a driller must avoid
+    if kind in ("screw", "nail"):
+        return "fastener"
+    if kind in ("stud", "beam"):
+        return "wood" if material == "wood" else "metal"
+    if kind == "plate":
+        return "metal"
+    return "cavity"
+
+
+def wall_map_from_wall_file(path: str | Path) -> WallMap:
+    """A WallMap from a wall description file's truth: a flat mesh of the wall and its objects, fully scanned.
+
+    Used when no mapping output exists yet (`arproj project --truth WALL.yaml`), so the session can be tried
+    end to end; a real session projects what the mapping found (wall.glb + objects.json).
+    """
+    from scanner.wall import load_wall
+
+    return wall_map_from_wall(load_wall(path), source=str(path))
+
+
+def wall_map_from_wall(wall: object, source: str = "wall truth") -> WallMap:
+    """wall_map_from_wall_file for a scanner.wall.Wall already in memory (e.g. scanner.wall.random_wall)."""
+    objects = []
+    for o in wall.objects:  # type: ignore[attr-defined]
+        width = float(o.diameter_m or 0.0)
+        objects.append(MapObject(_class_of(o), np.asarray(o.geometry_m, dtype=np.float64), width, 1.0,
+                                 tol.TRUTH_MAP_SIGMA_M))
+    w, h = wall.width_m, wall.height_m  # type: ignore[attr-defined]
+    rect = np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
+    return WallMap(plane_mesh(0.0, 0.0, w, h), objects, scanned=[rect], source=source)

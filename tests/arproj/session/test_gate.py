@@ -1,0 +1,80 @@
+"""The safety gate's decisions, stereo triangulation and laser scan matching against exact geometry."""
+
+import numpy as np
+import pytest
+
+from arproj.session import gate
+from arproj.session import tolerances as tol
+from geometry import Intrinsics, invert, look_at, make_pose, transform_points
+
+
+def _good(**changes):
+    ev = gate.RegistrationEvidence(pose_sigma_m=0.0008, closed_loop_errors_m=np.full(30, 0.001),
+                                   closed_loop_expected=35, stereo_residual_px=0.05)
+    for k, v in changes.items():
+        setattr(ev, k, v)
+    return ev
+
+
+def test_good_registration_opens_the_gate():
+    d = gate.decide(_good())
+    assert d.show_map and d.reasons == []
+    assert d.bound_m == pytest.approx(tol.Z95 * 0.0008 + 0.001)
+
+
+@pytest.mark.parametrize("changes, reason", [
+    ({"pose_failure": "only 5 corners"}, "wall pose unknown"),
+    ({"pose_sigma_m": None}, "not estimated"),
+    ({"head_command_error_deg": 0.2}, "head not where commanded"),
+    ({"head_failure": "did not answer"}, "head not answering"),
+    ({"robot_motion_m": 0.02}, "robot moved 20 mm"),
+    ({"closed_loop_errors_m": np.full(4, 0.001)}, "pattern lost: 4 of 35"),
+    ({"closed_loop_errors_m": np.full(30, 0.015)}, "projection lands up to 15 mm off"),
+    ({"laser_plane_offset_m": 0.02}, "laser and cameras disagree about the wall by 20 mm"),
+    ({"stereo_residual_px": 4.0}, "cameras disagree with the rig"),
+    ({"pose_sigma_m": 0.008}, "registration uncertain"),
+])
+def test_each_failure_closes_the_gate_and_says_why(changes, reason):
+    d = gate.decide(_good(**changes))
+    assert not d.show_map
+    assert any(reason in r for r in d.reasons), d.reasons
+
+
+def test_triangulation_recovers_points_and_flags_a_wrong_rig():
+    left = Intrinsics.from_fov(1280, 800, 70.0, dist=(-0.1, 0.05, 0.0, 0.0, 0.0))
+    right = Intrinsics.from_fov(1280, 800, 69.0, dist=(-0.12, 0.06, 0.0, 0.0, 0.0))
+    T_right_from_left = invert(make_pose(None, [0.2, 0.0, 0.0]))
+    rng = np.random.default_rng(1)
+    points = np.column_stack([rng.uniform(-0.8, 0.8, 20), rng.uniform(-0.5, 0.5, 20), rng.uniform(2, 4, 20)])
+    uv_l = left.project(points)
+    uv_r = right.project(transform_points(T_right_from_left, points))
+    found, residual = gate.triangulate(left, right, T_right_from_left, uv_l, uv_r)
+    assert np.abs(found - points).max() < 1e-6 and residual.max() < 1e-6
+    wrong = invert(make_pose(look_at([0, 0, 0], [0.02, 0.01, 1.0], up=[0, -1, 0])[:3, :3], [0.2, 0.0, 0.0]))
+    _, residual_wrong = gate.triangulate(left, right, wrong, uv_l, uv_r)
+    assert np.sqrt(np.mean(residual_wrong ** 2)) > gate.STEREO_RESIDUAL_MAX_PX
+
+
+def _scan(position, yaw, rng, noise=0.01):
+    """A 270° scan of a 5 x 4 m room from position, heading yaw (robot frame points)."""
+    angles = np.radians(np.arange(-135.0, 135.0, 0.25))
+    out = []
+    for a in angles:
+        d = np.array([np.cos(a + yaw), np.sin(a + yaw)])
+        hits = [(val - position[axis]) / d[axis] for axis, val in ((0, 0.0), (0, 5.0), (1, 0.0), (1, 4.0))
+                if abs(d[axis]) > 1e-9 and (val - position[axis]) / d[axis] > 0]
+        r = min(hits) + rng.normal(0, noise)
+        out.append([r * np.cos(a), r * np.sin(a)])
+    return np.array(out)
+
+
+@pytest.mark.parametrize("move", [(0.0, 0.0, 0.0), (0.006, 0.0, 0.0), (0.0, -0.01, 0.0), (0.004, 0.003, 0.4)])
+def test_scan_matching_measures_the_robots_motion(move):
+    rng = np.random.default_rng(5)
+    start = np.array([2.0, 1.5])
+    ref = _scan(start, 0.0, rng)
+    cur = _scan(start + move[:2], np.radians(move[2]), rng)
+    m = gate.scan_motion(ref, cur)
+    assert m.dx == pytest.approx(move[0], abs=0.0015)
+    assert m.dy == pytest.approx(move[1], abs=0.0015)
+    assert np.degrees(m.dtheta_rad) == pytest.approx(move[2], abs=0.06)

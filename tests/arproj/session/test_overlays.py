@@ -1,0 +1,107 @@
+"""Bands, DIN zones, drill-point check and legend, checked against exact geometry."""
+
+import numpy as np
+import pytest
+
+from arproj.session import overlays
+from arproj.session import tolerances as tol
+from arproj.session.wallmap import MapObject, WallMap, plane_mesh
+
+
+def _wall(objects, scanned=None):
+    rect = np.array([[0, 0], [3.0, 0], [3.0, 2.5], [0, 2.5]], dtype=float)
+    return WallMap(plane_mesh(0, 0, 3.0, 2.5), objects, scanned=[rect] if scanned is None else scanned)
+
+
+CABLE = MapObject("power_line", np.array([[1.0, 0.0], [1.0, 2.5]]), 0.008, 1.0, 0.002)
+PIPE = MapObject("metal_pipe", np.array([[0.0, 1.5], [3.0, 1.5]]), 0.018, 1.0, 0.002)
+CAVITY = MapObject("cavity", np.array([[2.0, 0.2], [2.5, 0.2], [2.5, 0.8], [2.0, 0.8]]), 0.0, 0.9, 0.003)
+
+
+def test_band_width_is_size_plus_margin_growing_with_uncertainty():
+    half = overlays.band_half_width_m(CABLE, 0.0)
+    assert half == pytest.approx(0.004 + tol.BASE_SAFETY_MARGIN_M + tol.Z95 * 0.002)
+    wider = overlays.band_half_width_m(CABLE, 0.004)
+    assert wider == pytest.approx(0.004 + tol.BASE_SAFETY_MARGIN_M + tol.Z95 * np.hypot(0.002, 0.004))
+
+
+def test_drawn_band_has_the_computed_width_and_class_colour():
+    wall = _wall([CABLE])
+    raster = overlays.draw_map(wall, 0.003, show_zones=False)
+    row = raster.image[int(raster.image.shape[0] / 2), :, :]
+    lit = np.flatnonzero(row[:, 3] > 0)
+    width_m = (lit.max() - lit.min() + 1) / raster.px_per_m
+    assert width_m == pytest.approx(2 * overlays.band_half_width_m(CABLE, 0.003), abs=2.5 / raster.px_per_m)
+    centre_col = round(raster.to_px(np.array([[1.0, 1.0]]))[0, 0])
+    assert tuple(row[centre_col, :3]) == overlays.CLASS_COLOR["power_line"]
+    assert np.mean(lit) / raster.px_per_m == pytest.approx(1.0, abs=1.0 / raster.px_per_m)
+
+
+def test_class_colours_are_distinct():
+    colours = np.array([c for _, c, _ in overlays.LEGEND], dtype=float)
+    d = np.linalg.norm(colours[:, None] - colours[None], axis=-1)
+    assert d[~np.eye(len(colours), dtype=bool)].min() > 100
+
+
+def test_drill_check_distances_and_verdicts():
+    wall = _wall([CABLE, PIPE, CAVITY])
+    check = overlays.check_drill_point(wall, np.array([1.1, 0.5]), 0.002)
+    assert check.nearest is CABLE
+    assert check.distance_m == pytest.approx(0.1 - 0.004)
+    assert check.verdict == overlays.VERDICT_SAFE
+    near = overlays.check_drill_point(wall, np.array([1.02, 0.5]), 0.002)
+    assert near.verdict == overlays.VERDICT_KEEP_AWAY and near.distance_m == pytest.approx(0.016)
+    inside = overlays.check_drill_point(wall, np.array([2.2, 0.5]), 0.002)
+    assert inside.nearest is CAVITY and inside.distance_m == 0.0 and inside.verdict == overlays.VERDICT_KEEP_AWAY
+    below_pipe = overlays.check_drill_point(wall, np.array([0.5, 1.45]), 0.002)
+    assert below_pipe.nearest is PIPE and below_pipe.distance_m == pytest.approx(0.05 - 0.009)
+
+
+def test_unscanned_point_is_unknown_and_zones_drawn_only_there():
+    scanned = [np.array([[1.5, 0.0], [3.0, 0.0], [3.0, 2.5], [1.5, 2.5]])]
+    wall = _wall([], scanned=scanned)
+    assert overlays.check_drill_point(wall, np.array([0.5, 1.0]), 0.002).verdict == overlays.VERDICT_UNKNOWN
+    assert overlays.check_drill_point(wall, np.array([2.0, 1.0]), 0.002).verdict == overlays.VERDICT_SAFE
+    raster = overlays.draw_map(wall, 0.002)
+    lit = raster.image[..., 3] > 0
+
+    def lit_at(x, y):
+        c, r = np.round(raster.to_px(np.array([[x, y]]))[0]).astype(int)
+        return bool(lit[r - 6:r + 7, c - 6:c + 7].any())
+
+    assert lit_at(0.7, 2.5 - 0.30)       # top zone (0.15–0.45 m below the ceiling), unscanned half
+    assert lit_at(0.7, 0.30)             # bottom zone
+    assert lit_at(0.2, 1.2)              # vertical zone beside the left corner (0.10–0.30 m)
+    assert not lit_at(0.7, 1.2)          # no zone here
+    assert not lit_at(2.2, 0.30)         # scanned half: the scan, not the zone, tells
+
+
+def test_din_zones_follow_the_standard_distances():
+    zones = overlays.din_zones(0.0, 0.0, 4.0, 2.5, openings=[(1.0, 0.0, 1.9, 2.0)])
+    assert (0.0, pytest.approx(2.05), 4.0, pytest.approx(2.35)) == zones[0]
+    assert zones[1] == (0.0, 0.15, 4.0, 0.45)
+    assert zones[2] == (0.1, 0.0, 0.3, 2.5)
+    assert zones[4] == (pytest.approx(0.7), 0.0, pytest.approx(0.9), 2.5)  # beside the door's left edge
+
+
+def test_legend_and_warning_are_drawn():
+    frame = np.zeros((800, 1280, 3), np.uint8)
+    overlays.draw_legend(frame, ["registered ±1.2 mm"])
+    for _, colour, _ in overlays.LEGEND:
+        assert np.any(np.all(frame == colour, axis=-1))
+    warning = overlays.warning_frame(1280, 800, ["robot moved 12 mm"])
+    assert tuple(warning[5, 640]) == (255, 40, 40)
+    assert warning[:, :, 0].mean() > warning[:, :, 2].mean()
+
+
+def test_map_is_drawn_only_inside_the_trusted_polygon():
+    wall = _wall([CABLE, PIPE])
+    clip = np.array([[0.5, 0.5], [1.8, 0.5], [1.8, 2.0], [0.5, 2.0]])
+    raster = overlays.draw_map(wall, 0.002, show_zones=False, clip=clip)
+
+    def lit_at(x, y):
+        c, r = np.round(raster.to_px(np.array([[x, y]]))[0]).astype(int)
+        return bool(raster.image[r, c, 3] > 0)
+
+    assert lit_at(1.0, 1.0) and lit_at(1.2, 1.5)   # cable and pipe inside
+    assert not lit_at(1.0, 0.2) and not lit_at(2.5, 1.5)  # the same objects outside: not drawn

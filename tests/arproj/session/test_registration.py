@@ -1,0 +1,83 @@
+"""Registration geometry: wall frame from a measured plane, rays to the wall, fold-over guard, closed-loop
+measurement and the laser/plane check — against exact constructions."""
+
+import numpy as np
+import pytest
+
+from arproj.session import registration
+from geometry import Intrinsics, invert, look_at, make_pose, rotation_about, transform_points
+
+PROJECTOR = Intrinsics(1664.0, 1664.0, 639.5, 639.5, 1280, 800, (0.02, -0.01, 0.0, 0.0, 0.0))
+
+
+def _T_wall_from_robot():
+    # robot 2 m in front of the wall, facing it (robot x towards the wall, z up)
+    R = np.column_stack([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # wall axes of robot x, y, z
+    return make_pose(R, [1.5, 0.0, 2.0])
+
+
+def test_snap_to_plane_keeps_the_prior_in_plane_and_takes_the_measured_plane():
+    truth = _T_wall_from_robot()
+    T_robot_from_wall = invert(truth)
+    normal, distance = T_robot_from_wall[:3, 2], -T_robot_from_wall[:3, 2] @ T_robot_from_wall[:3, 3]
+    prior = make_pose(rotation_about([0, 0, 1], np.radians(0.5)) @ rotation_about([1, 0, 0], np.radians(1.0)),
+                      [0.004, -0.003, 0.05]) @ truth  # tilted and 5 cm off the wall
+    snapped = registration.snap_to_plane(prior, normal, distance)
+    on_wall = transform_points(invert(snapped), [[0.3, 0.7, 0.0], [2.0, 1.5, 0.0]])
+    assert np.abs(transform_points(truth, on_wall)[:, 2]).max() < 1e-9  # z = 0 is the measured plane
+    assert np.allclose(snapped[:3, :3] @ snapped[:3, :3].T, np.eye(3))
+
+
+def test_rays_land_where_projection_says_and_fold_over_is_rejected():
+    T = look_at([1.0, 1.2, 2.5], [1.6, 1.1, 0.0], up=[0, 1, 0])
+    pixels = np.array([[100.0, 100.0], [640.0, 400.0], [1200.0, 700.0]])
+    pts = registration.rays_to_wall(T, PROJECTOR, pixels)
+    assert np.abs(pts[:, 2]).max() < 1e-12
+    assert np.allclose(PROJECTOR.project(transform_points(invert(T), pts)), pixels, atol=1e-6)
+    far = transform_points(invert(T), [[40.0, 1.0, 0.0]])  # far outside the view: distortion folds it back
+    _, inside = registration.project_in_view(PROJECTOR, far)
+    assert not inside[0]
+    assert registration.project_in_view(PROJECTOR, transform_points(invert(T), pts))[1].all()
+
+
+def test_closed_loop_measures_a_known_offset_exactly():
+    cam = Intrinsics.from_fov(1280, 800, 70.0, dist=(-0.1, 0.05, 0.0, 0.0, 0.0))
+    T_wall_from_left = look_at([1.4, 1.2, 2.0], [1.5, 1.2, 0.0], up=[0, 1, 0])
+    T_left_from_right = make_pose(rotation_about([0, 1, 0], np.radians(-0.5)), [0.2, 0.0, 0.0])
+    T_right_from_left = invert(T_left_from_right)
+    marks = np.array([[x, y] for x in np.linspace(1.0, 2.0, 5) for y in np.linspace(0.8, 1.6, 4)])
+    offset = np.array([0.0021, -0.0013])
+    landed = np.column_stack([marks + offset, np.zeros(len(marks))])
+    uv_l = cam.project(transform_points(invert(T_wall_from_left), landed))
+    uv_r = cam.project(transform_points(invert(T_wall_from_left @ T_left_from_right), landed))
+    loop = registration.measure_marks(marks, uv_l, uv_r, cam, cam, T_right_from_left, T_wall_from_left)
+    assert loop.seen.all() and loop.residual_px < 1e-6
+    assert np.allclose(loop.errors_xy, offset, atol=1e-7)
+    uv_r[3] += [6.0, -4.0]  # one mis-detected mark is dropped, not averaged in
+    loop = registration.measure_marks(marks, uv_l, uv_r, cam, cam, T_right_from_left, T_wall_from_left)
+    assert loop.seen.sum() == len(marks) - 1 and np.allclose(loop.offset_xy, offset, atol=1e-7)
+
+
+def test_laser_plane_offset_sees_a_wrong_camera_mount():
+    truth = _T_wall_from_robot()
+    x = np.linspace(0.3, 2.7, 200)
+    laser_wall = np.column_stack([x, np.full_like(x, 0.2), np.random.default_rng(0).normal(0, 0.01, len(x))])
+    laser_robot = transform_points(invert(truth), laser_wall)
+    assert registration.laser_plane_offset_m(truth, laser_robot, 1.5) < 0.003
+    wrong = make_pose(None, [0.0, 0.0, 0.02]) @ truth  # the wall believed 2 cm nearer
+    assert registration.laser_plane_offset_m(wrong, laser_robot, 1.5) == pytest.approx(0.02, abs=0.003)
+
+
+def test_oblique_far_end_is_less_certain_and_left_out_of_the_trusted_region():
+    T = look_at([0.5, 1.3, 1.0], [2.2, 1.3, 0.0], up=[0, 1, 0])  # about 60° to the wall
+    grid = np.array([[x, y] for x in np.linspace(1.0, 6.0, 26) for y in np.linspace(0.9, 1.7, 5)])
+    sigma = registration.local_registration_sigma_m(0.002, 0.1, T, grid, np.array([2.2, 1.3]), 0.0, 0.001, 0.0)
+    near, far = sigma[grid[:, 0] < 2.5].max(), sigma[grid[:, 0] > 5.0].min()
+    assert far > 3 * near
+    trusted = registration.trusted_region(grid, sigma, 0.010)
+    assert 0.2 < trusted.share < 1.0 and trusted.usable
+    inside = registration.inside_polygon(grid, trusted.polygon)
+    assert inside[grid[:, 0] < 2.5].all() and not inside[grid[:, 0] > 5.5].any()
+    assert trusted.sigma_m == pytest.approx(sigma[inside].max(), rel=1e-6)
+    assert registration.trusted_region(grid, np.full(len(grid), 0.0001), 0.010).polygon is None
+    assert not registration.trusted_region(grid, np.full(len(grid), 0.05), 0.010).usable

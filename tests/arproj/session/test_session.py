@@ -1,0 +1,142 @@
+"""The whole session on the simulated site: aim, estimate, verify, show — checked against the site's truth;
+then the faults the safety gate exists for (head slip, robot nudged, head gone)."""
+
+import numpy as np
+import pytest
+
+from arproj.devices import HeadSimulator, PanTiltHead
+from arproj.session.evaluate import true_landing_errors
+from arproj.session.output import MemoryOutput
+from arproj.session.robot_io import SimulatedRobot, nominal_rig
+from arproj.session.session import ProjectionSession
+from arproj.session.wallmap import wall_map_from_wall_file
+from geometry.poses import make_pose, rotation_about
+from scanner.wall import shipped_walls
+
+pytestmark = pytest.mark.gl
+
+
+@pytest.fixture(scope="module")
+def running(gl_context):
+    from arproj.sim.site import Site
+
+    site = Site.build(seed=3, ctx=gl_context, robot={"distance_m": 2.2, "incidence_deg": 20.0})
+    head_sim = HeadSimulator(speed_deg_s=600.0, initial_deg=tuple(site.head_angles_cmd_deg[:2]))
+    head = PanTiltHead(head_sim.url, timeout_s=0.1)
+    out = MemoryOutput()
+    robot = SimulatedRobot(site, 0, head_sim, head, out)
+    wall_map = wall_map_from_wall_file(shipped_walls()["demo_brick_wall"])
+    session = ProjectionSession(nominal_rig(site), wall_map, robot, ctx=gl_context)
+    session.aim_at([1.3, 1.1])
+    session.set_drill_point([1.5, 1.2])
+    decision = session.update()
+    yield site, head_sim, session, out, decision
+    session.close()
+    robot.close()
+
+
+def _marks(session):
+    from arproj.session.registration import choose_marks
+
+    return choose_marks(session.registration.T_wall_from_projector, session.projector_intr,
+                        session.wall_map.extent, grid=(5, 4))
+
+
+def test_registered_map_lands_within_two_millimetres(running):
+    site, _, session, out, decision = running
+    assert decision.show_map, decision.reasons
+    errors, _ = true_landing_errors(session, site, _marks(session), 0)
+    assert len(errors) >= 15
+    assert errors.mean() < 0.002 and np.percentile(errors, 95) < 0.004
+    # the closed loop's camera measurement agrees with the truth
+    loop = session.registration.loop
+    measured = np.linalg.norm(loop.errors_xy - session.registration.correction_xy, axis=1)
+    assert abs(np.mean(measured) - errors.mean()) < 0.0015
+    frame = out.last
+    assert frame.shape == (800, 1280, 3) and frame[:, :, 0].max() == 255  # the map with its legend
+    assert "safe" in session.drill_check([1.5, 1.2]).message
+
+
+def test_head_slip_is_caught_and_healed_by_re_estimating(running):
+    site, head_sim, session, _, _ = running
+    head_sim.faults.slip_deg = (0.35, -0.1)  # the mount slipped; the encoder still reports the command
+    try:
+        ev_before = session.evidence()
+        assert ev_before.head_command_error_deg == 0.0  # invisible to the head's own report
+        session.robot.sync_head()
+        errors, _ = true_landing_errors(session, site, _marks(session), 0)
+        assert errors.mean() > 0.010  # the shown map would now be a centimetre off
+        decision = session.update()
+        assert "projection landed off: re-estimating the wall pose" in session.log
+        assert decision.show_map, decision.reasons
+        errors, _ = true_landing_errors(session, site, _marks(session), 0)
+        assert errors.mean() < 0.002
+    finally:
+        head_sim.faults.slip_deg = (0.0, 0.0)
+
+
+def test_robot_nudge_is_seen_by_the_laser(running):
+    site, _, session, _, _ = running
+    nudge = make_pose(rotation_about([0, 0, 1], np.radians(0.3)), [0.012, -0.008, 0.0])
+    site.move_robot(site.T_room_from_robot @ nudge)
+    ev = session.evidence()
+    assert ev.robot_motion_m > 0.01
+    from arproj.session import gate
+
+    assert not gate.decide(ev).show_map  # until re-estimated, the old map would be wrong
+    decision = session.update()
+    assert "head or robot moved: re-estimating the wall pose" in session.log
+    assert decision.show_map, decision.reasons
+    errors, _ = true_landing_errors(session, site, _marks(session), 0)
+    assert errors.mean() < 0.002
+
+
+def test_dead_head_shows_the_warning_and_the_session_stays_up(running):
+    _, head_sim, session, _, _ = running
+    head_sim.faults.dead = True
+    session.robot.head.timeout_s = 0.02
+    try:
+        decision = session.decide()
+        assert not decision.show_map
+        assert any("head not answering" in r for r in decision.reasons)
+        frame = session.render_frame(decision)
+        assert frame[4, 640, 0] == 255 and frame[4, 640, 2] == 40  # the red warning border
+    finally:
+        head_sim.faults.dead = False
+        session.robot.head.timeout_s = 0.1
+
+
+def test_degraded_scenarios_never_show_a_wrong_map(running):
+    """Feature-level scenarios on the real registration: strong faults are warned, none is shown wrong."""
+    from arproj.session import registration, scenarios
+
+    site, _, session, _, _ = running
+    session.update()
+    reg = session.registration
+    rig = session.rig
+    belief = scenarios.Belief(rig, reg.T_wall_from_robot, reg.T_wall_from_projector, reg.sigma_m, reg.distance_m)
+    truth = scenarios.truth_of(site, 0)
+    marks = registration.choose_marks(reg.T_wall_from_projector, session.projector_intr, session.wall_map.extent)
+    features = marks
+    rng = np.random.default_rng(11)
+    calm = scenarios.evaluate(belief, truth, marks, features, rng, "none", "-")
+    assert calm.show_map and calm.true_max_m < 0.005
+    outcomes = []
+    for slip in (0.05, 0.3, 0.6):
+        angles = site.head_angles_true_deg + np.array([slip, -slip / 2, 0.0])
+        slipped = scenarios.Truth(truth.T_wall_from_robot, site.head.T_robot_from_projector(angles),
+                                  truth.projector, truth.camera_left, truth.camera_right,
+                                  truth.T_robot_from_camera_left, truth.T_camera_right_from_camera_left)
+        outcomes.append(scenarios.evaluate(belief, slipped, marks, features, rng, "head slipped", f"{slip}"))
+    for variant in range(4):
+        wrong_rig, what = scenarios.perturbed_rig(rig, variant, rng)
+        wrong_belief = scenarios.Belief(wrong_rig, belief.T_wall_from_robot, belief.T_wall_from_projector,
+                                        belief.sigma_m, belief.distance_m)
+        outcomes.append(scenarios.evaluate(wrong_belief, truth, marks, features, rng, "wrong rig", what,
+                                           laser_points=site.laser_scan().points_robot()))
+    occluded = scenarios.evaluate(belief, truth, marks, features, rng, "occluded", "90 %",
+                                  occluder=(-10.0, -10.0, 10.0, 10.0))
+    assert not occluded.show_map and any("pattern lost" in r for r in occluded.reasons)
+    assert not any(o.unsafe for o in outcomes), [(o.kind, o.magnitude, o.true_max_m) for o in outcomes]
+    big_slip = outcomes[2]
+    assert big_slip.true_max_m > 0.01 and not big_slip.show_map

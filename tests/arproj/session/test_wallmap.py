@@ -1,0 +1,75 @@
+"""Loading the mapping's exports (wall.glb + objects.json) and the bad-input messages."""
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+from PIL import Image
+
+from arproj.session import overlays
+from arproj.session.wallmap import load_wall_map, plane_mesh, wall_map_from_wall_file
+from geometry.errors import InputError
+from scanner.wall import shipped_walls
+
+
+def _write_glb(path, width=2.0, height=1.5, scanned_right_half=True):
+    """A wall mesh textured in wall coordinates (uv = x/W, y/H) whose left half is unscanned (alpha 0)."""
+    mesh = plane_mesh(0.0, 0.0, width, height)
+    texture = np.zeros((60, 80, 4), np.uint8)
+    texture[..., :3] = 120
+    texture[:, 40:, 3] = 255
+    if not scanned_right_half:
+        texture[..., 3] = 255
+    uv = mesh.vertices[:, :2] / [width, height]
+    material = trimesh.visual.material.SimpleMaterial(image=Image.fromarray(texture, "RGBA"))
+    mesh.visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
+    mesh.export(path)
+
+
+def test_glb_and_objects_load_with_coverage_from_alpha(tmp_path):
+    _write_glb(tmp_path / "wall.glb")
+    (tmp_path / "objects.json").write_text(json.dumps({"objects": [
+        {"class": "power_line", "points_m": [[1.5, 0.0], [1.5, 1.5]], "width_m": 0.01, "confidence": 0.5},
+        {"class": "cavity", "points_m": [[1.6, 0.2], [1.9, 0.2], [1.9, 0.6], [1.6, 0.6]], "width_m": 0.0,
+         "confidence": 0.9, "position_sigma_m": 0.004}]}))
+    wm = load_wall_map(tmp_path / "wall.glb")
+    assert wm.extent == pytest.approx((0.0, 0.0, 2.0, 1.5))
+    assert wm.uv_from_xy == pytest.approx(np.array([[0.5, 0, 0], [0, 1 / 1.5, 0]]), abs=1e-6)
+    assert [o.kind for o in wm.objects] == ["power_line", "cavity"]
+    assert wm.objects[0].sigma_m == pytest.approx(0.006)  # 3 mm default / confidence 0.5
+    assert wm.objects[1].sigma_m == pytest.approx(0.004) and wm.objects[1].is_outline
+    assert overlays.point_scanned(wm, np.array([1.5, 0.7]))
+    assert not overlays.point_scanned(wm, np.array([0.5, 0.7]))
+    assert overlays.check_drill_point(wm, np.array([0.5, 0.7]), 0.001).verdict == overlays.VERDICT_UNKNOWN
+
+
+def test_missing_and_malformed_glb_give_messages(tmp_path):
+    with pytest.raises(InputError, match="no such map file"):
+        load_wall_map(tmp_path / "nope.glb")
+    bad = tmp_path / "bad.glb"
+    bad.write_bytes(b"glTF\x02\x00\x00\x00garbage that is not a GLB")
+    with pytest.raises(InputError, match="not a readable GLB"):
+        load_wall_map(bad)
+
+
+@pytest.mark.parametrize("doc, message", [
+    ("{", "not valid JSON"),
+    ('{"things": []}', 'expected {"objects"'),
+    ('{"objects": [{"class": "dragon", "points_m": [[0, 0]], "width_m": 0.01}]}', "class 'dragon' is unknown"),
+    ('{"objects": [{"class": "metal_pipe", "width_m": 0.01}]}', "key 'points_m' is missing"),
+    ('{"objects": [{"class": "metal_pipe", "points_m": [[0, "x"]], "width_m": 0.01}]}', "points_m must be"),
+    ('{"objects": [{"class": "metal_pipe", "points_m": [[0, 0]], "width_m": -1}]}', "width ≥ 0"),
+])
+def test_bad_objects_json_names_the_problem(tmp_path, doc, message):
+    _write_glb(tmp_path / "wall.glb")
+    (tmp_path / "objects.json").write_text(doc)
+    with pytest.raises(InputError, match=message):
+        load_wall_map(tmp_path / "wall.glb")
+
+
+def test_truth_map_from_a_wall_file_uses_the_mapping_classes():
+    wm = wall_map_from_wall_file(shipped_walls()["paper_test_plate"])
+    kinds = {o.kind for o in wm.objects}
+    assert "power_line" in kinds and "metal_pipe" in kinds
+    assert all(o.width_m > 0 for o in wm.objects if o.kind in ("power_line", "metal_pipe"))

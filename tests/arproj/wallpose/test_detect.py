@@ -1,0 +1,32 @@
+import numpy as np
+
+from arproj.wallpose.detect import detect
+from geometry.poses import invert, transform_points
+
+
+def _true_pixels(case, camera, ids):
+    T = case.scene.T_robot_from_projector_true
+    rays = case.views.projector.rays(case.pattern.corner_projector_px[ids])
+    n, d = case.plane.in_frame(invert(T))
+    X = transform_points(T, rays * (-d / (rays @ n))[:, None])
+    T_robot_from_cam = case.views.T_robot_from_camera_left if camera == "camera_left" \
+        else case.views.T_robot_from_camera_right
+    return case.views.camera(camera).project(transform_points(invert(T_robot_from_cam), X))
+
+
+def test_corners_found_at_their_true_pixels(case_2m_30, photos_2m_30) -> None:
+    for camera, image in zip(("camera_left", "camera_right"), photos_2m_30, strict=True):
+        det = detect(image, case_2m_30.pattern, case_2m_30.views.camera(camera), case_2m_30.views.projector,
+                     camera)
+        assert det.reason is None
+        assert det.count > 0.9 * case_2m_30.pattern.n_corners
+        err = det.pixels - _true_pixels(case_2m_30, camera, det.corner_ids)
+        assert np.sqrt(np.mean(err ** 2)) < 0.15          # subpixel: noise 2 grey levels, blur 0.7 px
+        assert np.abs(err).max() < 0.6                    # and no corner matched to the wrong id
+        assert abs(err.mean()) < 0.03
+
+
+def test_blank_image_gives_a_reason_not_corners(case_2m_30) -> None:
+    blank = np.full((800, 1280), 30, np.uint8)
+    det = detect(blank, case_2m_30.pattern, case_2m_30.views.camera_left, case_2m_30.views.projector, "camera_left")
+    assert det.count == 0 and "low contrast" in det.reason

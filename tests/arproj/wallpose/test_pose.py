@@ -1,0 +1,64 @@
+"""The full pose on the simulated site (GL): plane from the cameras, the rest from localization, floor, laser."""
+
+import numpy as np
+import pytest
+
+from arproj.wallpose.estimate import estimate_plane
+from arproj.wallpose.evidence import NotEnoughEvidenceError
+from arproj.wallpose.pattern import choose_pattern
+from arproj.wallpose.pose import RoomMap, estimate_wall_pose
+from arproj.wallpose.simtrial import calibrated_views, photograph_pair, true_landing, wall_truth
+from geometry.poses import invert, rotation_angle_deg
+
+pytestmark = pytest.mark.gl
+
+
+@pytest.fixture(scope="module")
+def sim_estimate(sim_site):
+    views = calibrated_views(sim_site)
+    pattern = choose_pattern(views, 2.5, 20.0)
+    left, right = photograph_pair(sim_site, pattern.image(), np.random.default_rng(0))
+    return views, pattern, estimate_plane(left, right, pattern, views)
+
+
+def test_plane_on_the_simulated_site(sim_site, sim_estimate) -> None:
+    _, pattern, est = sim_estimate
+    truth = wall_truth(sim_site)
+    centre = true_landing(sim_site, pattern.centre_px[None])[0]
+    n_err, d_err = est.normal_error_deg(truth.normal), abs(est.offset_at(centre))
+    assert n_err < 0.05 and d_err < 0.001
+    assert n_err <= est.normal_95_deg and d_err <= est.centre_distance_95_m
+
+
+def test_full_pose_against_truth(sim_site, sim_estimate) -> None:
+    views, _, est = sim_estimate
+    T_robot_from_projector = views.T_robot_from_camera_left @ est.T_camera_left_from_projector
+    room = RoomMap.from_site(sim_site)
+    T_true = invert(sim_site.walls[0].T_room_from_wall) @ sim_site.T_room_from_robot
+    T_localized = invert(sim_site.walls[0].T_room_from_wall) @ sim_site.localized_T_room_from_robot
+    without = estimate_wall_pose(est, 0, room, sim_site.localized_T_room_from_robot, T_robot_from_projector)
+    with_laser = estimate_wall_pose(est, 0, room, sim_site.localized_T_room_from_robot, T_robot_from_projector,
+                                    sim_site.laser_scan().points_robot())
+    for pose in (without, with_laser):
+        error = pose.T_wall_from_robot[:3, 3] - T_true[:3, 3]
+        # the plane fixes the distance and the tilt exactly, whatever the localization says
+        assert abs(error[2]) < 0.002 and abs(error[2]) < 4 * pose.sigma_distance_m
+        assert abs(error[1]) < 4 * pose.sigma_height_m
+    # the laser scan of the side walls pins the position along the wall and the heading
+    along = with_laser.T_wall_from_robot[0, 3] - T_true[0, 3]
+    assert abs(along) < 0.005 and abs(along) < 4 * with_laser.sigma_along_m
+    assert rotation_angle_deg(with_laser.T_wall_from_robot, T_true) < 0.05
+    assert rotation_angle_deg(with_laser.T_wall_from_robot, T_true) < rotation_angle_deg(T_localized, T_true) \
+        or rotation_angle_deg(T_localized, T_true) < 0.05
+    # and the projector's pose on the wall follows
+    T_wp_true = invert(sim_site.walls[0].T_room_from_wall) @ sim_site.T_room_from("projector")
+    assert np.linalg.norm(with_laser.T_wall_from_projector[:3, 3] - T_wp_true[:3, 3]) < 0.005
+    assert rotation_angle_deg(with_laser.T_wall_from_projector, T_wp_true) < 0.05
+
+
+def test_plane_of_another_wall_is_refused(sim_site, sim_estimate) -> None:
+    views, _, est = sim_estimate
+    T_robot_from_projector = views.T_robot_from_camera_left @ est.T_camera_left_from_projector
+    with pytest.raises(NotEnoughEvidenceError, match="wall 1"):
+        estimate_wall_pose(est, 1, RoomMap.from_site(sim_site), sim_site.localized_T_room_from_robot,
+                           T_robot_from_projector)
