@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import sys
 
 import typer
 
@@ -17,7 +19,9 @@ def _command(name: str, module):
                                    "noisier; targets are judged on the full run)."),
         seed: int = typer.Option(0, "--seed", help="Seed of the simulated inputs."),
     ) -> None:
-        table: BenchTable = module.run(quick=quick, seed=seed)
+        # Whatever a benchmark says while it runs goes to stderr: stdout carries only the table (or the JSON).
+        with contextlib.redirect_stdout(sys.stderr):
+            table: BenchTable = module.run(quick=quick, seed=seed)
         if as_json:
             print(table.to_json())
         else:
@@ -74,7 +78,6 @@ def _run_isolated(name: str, quick: bool, seed: int) -> BenchTable | str:
     """One benchmark in a fresh process: GL contexts, EGL displays (pyrender terminates its display when it is
     done) and memory of one benchmark cannot disturb the next. Returns the table, or why it failed."""
     import subprocess
-    import sys
 
     cmd = [sys.executable, "-c", "from arproj.cli import main; main()", "bench", name, "--json", "--seed", str(seed)]
     if quick:

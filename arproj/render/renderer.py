@@ -32,8 +32,9 @@ from geometry.poses import invert, transform_points
 _IMAGE_ROWS_DOWN = np.diag([1.0, -1.0, 1.0, 1.0])
 # The depth range is fitted to the mesh; this keeps 24-bit depth precise whatever the scene size.
 _NEAR_FAR_RATIO = 1e-4
-# Trilinear, not anisotropic: on llvmpipe anisotropic filtering costs 2-3x the frame time of a textured wall.
-_TEXTURE_FILTER = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+# Bilinear within the nearest mip level: on llvmpipe, trilinear costs ~20 % and anisotropic filtering 2-3x the
+# frame time of a textured wall, for differences a projected picture does not show.
+_TEXTURE_FILTER = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
 
 
 @dataclass
