@@ -289,10 +289,15 @@ def _degraded(bases: list[dict], n: int, seed: int) -> list[scenarios.Outcome]:
             except InputError as err:
                 wrong.append((bi, wrong_rig, what, err.message))
                 continue
-            prior, _, _ = session.robot.wall_prior()
-            T_wall_from_robot = registration.snap_to_plane(prior, plane.normal, plane.distance)
-            T_wall_from_projector = T_wall_from_robot @ views.T_robot_from_camera_left @ \
-                plane.T_camera_left_from_projector
+            # The same fusion the session runs (localization, floor, laser): the in-plane position does not
+            # come from the rig, so the wrong rig is judged on what it really changes.
+            try:
+                T_wall_from_robot, T_robot_from_projector, *_ = session.pose_from_plane(
+                    plane, views, session.registration.reference_scan)
+            except InputError as err:
+                wrong.append((bi, wrong_rig, what, err.message))
+                continue
+            T_wall_from_projector = T_wall_from_robot @ T_robot_from_projector
             belief = scenarios.Belief(wrong_rig, T_wall_from_robot, T_wall_from_projector, b["belief"].sigma_m,
                                       b["distance"])
             wrong.append((bi, wrong_rig, what, belief))

@@ -180,6 +180,24 @@ class ProjectionSession:
         trans = max(Uncertainty().projector_translation_m, 3e-3 * _quality(self.rig, "head", "position_rms_mm"))
         return Uncertainty(projector_rotation_deg=rot, projector_translation_m=trans)
 
+    def pose_from_plane(self, plane: PlaneEstimate, views: ViewRig, scan: NDArray[np.float64] | None
+                        ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float, str | None]:
+        """The full wall pose from a measured plane: (T_wall_from_robot, T_robot_from_projector, in-plane σ m,
+        roll σ rad, source or None). With the robot's localization, floor and laser (full_pose_inputs) the
+        wall-pose package fuses them; otherwise the plane is snapped onto the robot's prior. Raises InputError
+        (not enough evidence) when the fusion declines."""
+        T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
+        prior, in_plane_sigma, _ = self.robot.wall_prior()
+        full = getattr(self.robot, "full_pose_inputs", lambda: None)()
+        if full is None:
+            return (registration.snap_to_plane(prior, plane.normal, plane.distance), T_robot_from_projector,
+                    in_plane_sigma, 0.0, None)
+        room, wall_index, localized, loc_m, loc_deg = full
+        pose = estimate_wall_pose(plane, wall_index, room, localized, T_robot_from_projector, scan, loc_m, loc_deg)
+        in_plane = float(np.hypot(pose.sigma_along_m, pose.sigma_height_m))
+        return (pose.T_wall_from_robot, T_robot_from_projector, in_plane, float(np.radians(pose.sigma_roll_deg)),
+                "wall pose (" + ", ".join(pose.sources) + ")")
+
     def estimate(self) -> Registration | None:
         """Project the pattern, estimate the wall plane and the projector's pose; None (and pose_failure set)
         when the pictures do not support a trustworthy pose."""
@@ -211,25 +229,16 @@ class ProjectionSession:
             self.pose_failure = err.message.replace("not enough evidence for the wall pose: ", "")
             self.log.append(f"wall pose: {self.pose_failure}")
             return None
-        T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
         scan = self.robot.laser_points()
-        roll_sigma_rad = 0.0
-        full = getattr(self.robot, "full_pose_inputs", lambda: None)()
-        if full is not None:  # the wall-pose package fuses plane, localization, floor and laser scan
-            room, wall_index, localized, loc_m, loc_deg = full
-            try:
-                pose = estimate_wall_pose(plane, wall_index, room, localized, T_robot_from_projector, scan, loc_m,
-                                          loc_deg)
-            except InputError as err:
-                self.pose_failure = err.message.replace("not enough evidence for the wall pose: ", "")
-                self.log.append(f"wall pose: {self.pose_failure}")
-                return None
-            T_wall_from_robot = pose.T_wall_from_robot
-            in_plane_sigma = float(np.hypot(pose.sigma_along_m, pose.sigma_height_m))
-            roll_sigma_rad = float(np.radians(pose.sigma_roll_deg))
-            source = "wall pose (" + ", ".join(pose.sources) + ")"
-        else:
-            T_wall_from_robot = registration.snap_to_plane(prior, plane.normal, plane.distance)
+        try:
+            T_wall_from_robot, T_robot_from_projector, in_plane_sigma, roll_sigma_rad, fused = \
+                self.pose_from_plane(plane, views, scan)
+        except InputError as err:
+            self.pose_failure = err.message.replace("not enough evidence for the wall pose: ", "")
+            self.log.append(f"wall pose: {self.pose_failure}")
+            return None
+        if fused:
+            source = fused
         self.pose_failure = None
         T_wall_from_projector = T_wall_from_robot @ T_robot_from_projector
         aim = registration.aim_point_on_wall(T_wall_from_projector, self.projector_intr)
