@@ -12,7 +12,7 @@ from pathlib import Path
 
 import typer
 
-from arproj.console import console, err_console, track
+from arproj.console import console, err_console, progress_bar, track
 from geometry.errors import InputError
 
 
@@ -150,6 +150,44 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     ) -> None:
         """Stereo calibration from image files; writes ROS camera_info files and the rig file."""
         stereo_command(left, right, board, out, model, as_json)
+
+    @calibrate_app.command("capture")
+    def capture(
+        left_camera: str = typer.Option(..., "--left-camera", help="Left camera: an index (0), a video file or "
+                                        "a stream URL (anything cv2.VideoCapture opens)."),
+        right_camera: str = typer.Option(..., "--right-camera", help="Right camera, likewise."),
+        board: str = typer.Option("chessboard:9x6:0.025", "--board", help="Board spec, as for `stereo`."),
+        out: Path = typer.Option(..., "--out", help="Folder for left_NN.png / right_NN.png."),
+        pairs: int = typer.Option(20, "--pairs", min=1, help="Stop after this many new views of the board."),
+        max_frames: int = typer.Option(3000, "--max-frames", min=1, help="Give up after this many frames."),
+    ) -> None:
+        """Capture stereo pairs from live cameras: keeps frames where both see the board from a new view.
+
+        Move the board through every part of the image and tilt it left/right and up/down; then run
+        `arproj calibrate stereo --left 'OUT/left_*.png' --right 'OUT/right_*.png' --board … --out RIG`.
+        """
+        from calibration.boards import parse_board
+        from calibration.capture import capture_pairs, open_source
+
+        spec = parse_board(board)
+        left_cap = open_source(left_camera, "left")
+        try:
+            right_cap = open_source(right_camera, "right")
+            try:
+                with progress_bar() as bar:
+                    task = bar.add_task("views kept", total=pairs)
+                    result = capture_pairs(left_cap, right_cap, spec, out, pairs, max_frames,
+                                           on_frame=lambda _frames, kept: bar.update(task, completed=kept))
+            finally:
+                right_cap.release()
+        finally:
+            left_cap.release()
+        console.print(f"{len(result.left_files)} pairs kept from {result.frames_read} frames "
+                      f"({result.frames_with_board} with the board in both) → {out}")
+        if len(result.left_files) < pairs:
+            err_console.print("[yellow]fewer views than asked for:[/] show the board in more places and tilts")
+        console.print(f"next: arproj calibrate stereo --left '{out}/left_*.png' --right '{out}/right_*.png' "
+                      f"--board {board} --out RIG")
 
     @calibrate_app.command("projector")
     def projector(
