@@ -1,6 +1,6 @@
 """Scan log → stitched frame poses → occupancy/signal grid → classified objects (what `arproj map` runs).
 
-Reads the SQLite scan log written by scanner.log (format arproj-scanlog/1). Bad parts of a log are skipped
+Reads the SQLite scan log written by scanner.log (format arproj-scanlog/2 or /1). Bad parts of a log are skipped
 with a warning and the map is built from what is sound: passes that cannot be read (a truncated file), samples
 without a position, NaN readings (that sensor only); cells no sample reached stay *unknown*.
 """
@@ -28,7 +28,7 @@ from mapping.objects import (
     extract_regions,
     near_lines,
 )
-from mapping.stitching import FrameGraph
+from mapping.stitching import FrameGraph, laser_constraints
 from scanner.log import ScanLog
 
 STITCH_ROUNDS = 2  # feature pairing + alignment rounds (the second re-pairs and re-linearises)
@@ -163,8 +163,8 @@ def wall_bounds(data: ScanData, xy: NDArray[np.float64]) -> tuple[float, float, 
 
 
 def stitch_frames(data: ScanData) -> tuple[NDArray[np.float64] | None, list[str]]:
-    """Frame poses aligned from their localization priors (and, where frames overlap, shared in-wall
-    features); None if the log has no frames. See mapping.stitching."""
+    """Frame poses aligned from their localization priors, the 2-D laser's x fixes (if logged) and, where
+    frames overlap, shared in-wall features; None if the log has no frames. See mapping.stitching."""
     from mapping.frame_features import feature_constraints, frames_features
 
     f = data.frames
@@ -182,20 +182,26 @@ def stitch_frames(data: ScanData) -> tuple[NDArray[np.float64] | None, list[str]
     eig = np.linalg.eigvalsh(cov)
     cov[eig.min(axis=1) <= 0] += np.diag([1e-8, 1e-8, 1e-10])
     features = frames_features(data)
-    poses, n_feat, dropped = est.copy(), 0, 0
+    poses, n_feat, n_laser, dropped = est.copy(), 0, 0, 0
     for round_ in range(STITCH_ROUNDS):
-        # Round 1 pairs features by the localization; later rounds re-pair them by the aligned poses and
-        # re-linearise the rotations about those (Gauss–Newton)
+        # Round 1 pairs features by the localization (and laser); later rounds re-pair them by the aligned
+        # poses and re-linearise the rotations about those (Gauss–Newton)
         graph = FrameGraph(poses.copy())
         graph.add_priors(est, cov)
+        n_laser = laser_constraints(graph, f)
+        first_feature = graph.n_blocks
         sigma = None if round_ == 0 else np.tile([0.003, 0.003, 0.002], (len(est), 1))
         n_feat = feature_constraints(data, graph, poses, features, sigma)
-        if n_feat == 0:
+        if n_feat == 0 and n_laser == 0:
             break
-        poses, dropped = graph.solve_robust(feature_blocks_from=1)
+        poses, dropped = graph.solve_robust(feature_blocks_from=first_feature)
+        if n_feat == 0:
+            break  # laser only: linear, one solve is exact
     poses[bad] = np.nan
-    if n_feat:
-        notes.append(f"stitched {len(est)} frames with {n_feat - dropped} shared in-wall feature(s)"
+    if n_feat or n_laser:
+        parts = ([f"{n_laser} laser fix(es)"] if n_laser else []) + \
+            ([f"{n_feat - dropped} shared in-wall feature(s)"] if n_feat else [])
+        notes.append(f"stitched {len(est)} frames with {' and '.join(parts)}"
                      + (f" ({dropped} inconsistent pairing(s) dropped)" if dropped else ""))
     return poses, notes
 

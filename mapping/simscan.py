@@ -3,7 +3,9 @@
 For tests and benchmarks of the mapping: frames side by side as scanner.plan lays them out, serpentine
 passes along u at `line_spacing_m`, readings from scanner.sensor_model (hysteresis, noise, quantisation to
 device counts), frame poses with a robot placement error (truth) and a localization estimate with its own
-error and covariance. The samples are what scanner.log would hold; `write_log` stores them in that format.
+error and covariance, and (laser=True) the robot's 2-D lasers' fix of each frame's x, y, φ against side walls and floor
+(scanner.laser: simulated room scan, range noise and outliers, line fits). The samples are what scanner.log
+would hold; `write_log` stores them in that format.
 The scanning subsystem's own executor (`arproj scan --sim`) is the full-fidelity path; this one skips the
 devices and the time model so a benchmark can scan 20 walls quickly.
 """
@@ -16,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from mapping.pipeline import ScanData
-from scanner.log import SAMPLE_COLUMNS, ScanLog
+from scanner.laser import LASER_KEYS, simulate_fix
+from scanner.log import FORMAT, SAMPLE_COLUMNS, ScanLog
 from scanner.sensor_model import COUNTS_FULL_SCALE, SensorConfig
 from scanner.sensor_model import SensorModel as ForwardModel
 from scanner.wall import Wall
@@ -25,15 +28,16 @@ from scanner.wall import Wall
 def simulate_scan(wall: Wall, seed: int = 0, line_spacing_m: float = 0.01, sample_step_m: float = 0.001,
                   frame_width_m: float = 0.35, overlap_m: float = 0.005, robot_sigma: tuple = (0.01, 0.01, 0.002),
                   loc_sigma: tuple = (0.002, 0.002, 0.0003), vertical_spacing_m: float | None = None,
-                  sensor: SensorConfig | None = None) -> ScanData:
-    """A dense raster scan of `wall`. sigmas: (x m, y m, phi rad). vertical_spacing_m adds vertical passes."""
+                  sensor: SensorConfig | None = None, laser: bool = True) -> ScanData:
+    """A dense raster scan of `wall`. sigmas: (x m, y m, phi rad). vertical_spacing_m adds vertical passes.
+    laser: log each frame's 2-D laser fix (else the laser columns are NaN, as in a version 1 log)."""
     rng = np.random.default_rng(seed)
     cfg = sensor or SensorConfig()
     model = ForwardModel(wall, cfg)
     n_frames = max(1, math.ceil(wall.width_m / frame_width_m - 1e-9))
     frames: dict[str, list] = {k: [] for k in ("frame_id", "time_s", "cmd_x_m", "cmd_y_m", "cmd_phi_rad",
                                                "est_x_m", "est_y_m", "est_phi_rad", "true_x_m", "true_y_m",
-                                               "true_phi_rad", "cov")}
+                                               "true_phi_rad", "cov", *LASER_KEYS)}
     cols: dict[str, list[np.ndarray]] = {c: [] for c in SAMPLE_COLUMNS if c != "seq"}
     pass_id = 0
     t = 0.0
@@ -49,6 +53,10 @@ def simulate_scan(wall: Wall, seed: int = 0, line_spacing_m: float = 0.01, sampl
         frames["frame_id"].append(f)
         frames["time_s"].append(t)
         frames["cov"].append(np.diag(np.asarray(loc_sigma, dtype=np.float64) ** 2))
+        fix = simulate_fix(tuple(true), wall.width_m, np.random.default_rng([seed, f, 103]))[0] if laser \
+            else dict.fromkeys(LASER_KEYS, np.nan)  # own stream: the scan's other draws stay as they were
+        for key in LASER_KEYS:
+            frames[key].append(fix[key])
         u_hi = min(frame_width_m + overlap_m, wall.width_m - x0)
         passes = []
         n_rows = math.floor(wall.height_m / line_spacing_m + 1e-9) + 1
@@ -91,7 +99,7 @@ def simulate_scan(wall: Wall, seed: int = 0, line_spacing_m: float = 0.01, sampl
     samples["seq"] = np.arange(samples["time_s"].shape[0])
     frame_arrays = {k: np.asarray(v, dtype=np.int64 if k == "frame_id" else np.float64)
                     for k, v in frames.items()}
-    meta = {"format": "arproj-scanlog/1", "status": "complete", "wall_name": wall.name,
+    meta = {"format": FORMAT, "status": "complete", "wall_name": wall.name,
             "wall_width_m": wall.width_m, "wall_height_m": wall.height_m, "wall_fingerprint": wall.fingerprint(),
             "wall_json": wall.to_dict(), "sensor": cfg.to_dict(), "seed": seed,
             "plan": {"kind": "dense", "line_spacing_m": line_spacing_m}}

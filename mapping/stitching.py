@@ -7,6 +7,8 @@ x_i = (tx, ty, θ) [m, m, rad] with p_wall = R(θ)·p_frame + t.
 Constraints (each Gaussian, with its own covariance Σ):
   * prior        — the localization solution for frame i: z = x_i;
   * relative     — the laser's relative measurement between frames i and j: z = x_j − x_i;
+  * laser fix    — the 2-D lasers' fix of frame i's pose against the side walls and the floor (scanner.laser,
+                   logged per frame with σ per coordinate): z = tx_i, ty_i, θ_i (1 row each);
   * point        — one in-wall feature (screw, nail, a pipe's bend) seen in frames i and j at frame
                    coordinates p_i and p_j: R_i p_i + t_i − (R_j p_j + t_j) = 0 (2 rows);
   * line         — a pipe or cable crossing the border between frames i and j: a point p_j of frame j on frame
@@ -30,6 +32,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import InputError
 from mapping import tolerances as tol
+
+# A laser fix is never trusted beyond these σ (x m, y m, θ rad): mounting calibration residue, floor flatness
+LASER_SIGMA_FLOOR = (0.0002, 0.0002, 1e-4)
 
 
 # ---- planes ------------------------------------------------------------------------------------------------
@@ -161,6 +166,11 @@ class FrameGraph:
     def n_frames(self) -> int:
         return int(self.linearisation.shape[0])
 
+    @property
+    def n_blocks(self) -> int:
+        """Constraint blocks added so far (solve_robust's feature_blocks_from counts these)."""
+        return len(self._blocks)
+
     def _add(self, i: ArrayLike, j: ArrayLike | None, Ji: NDArray, Jj: NDArray | None, z: NDArray,
              info: NDArray) -> None:
         """Constraints z = Ji x_i + Jj x_j, each (m rows); info = Σ⁻¹ (k, m, m)."""
@@ -202,6 +212,17 @@ class FrameGraph:
         k = z.shape[0]
         eye = np.broadcast_to(np.eye(3), (k, 3, 3))
         self._add(i, j, -eye.copy(), eye.copy(), z, self._info(cov, k, 3))
+
+    def add_coordinate(self, i: ArrayLike, axis: int, value: ArrayLike, sigma: ArrayLike) -> None:
+        """An absolute measurement of one pose coordinate (axis 0 tx, 1 ty, 2 θ) of frames i: z = x_i[axis]."""
+        i = np.asarray(i, dtype=np.int64).reshape(-1)
+        k = i.shape[0]
+        J = np.zeros((k, 1, 3))
+        J[:, 0, axis] = 1.0
+        sig = np.broadcast_to(np.asarray(sigma, dtype=np.float64), (k,))
+        if np.any(sig <= 0):
+            raise InputError("a stitching standard deviation is not positive")
+        self._add(i, None, J, None, np.asarray(value, dtype=np.float64).reshape(k, 1), (1.0 / sig**2)[:, None, None])
 
     def _point_terms(self, idx: NDArray, p: NDArray) -> tuple[NDArray, NDArray]:
         """Linearised R(θ)p + t = J·x + c about the linearisation θ: returns (J (k,2,3), c (k,2))."""
@@ -364,6 +385,24 @@ class FrameGraph:
                 e[3 * f:3 * f + 3] = np.eye(3)
                 cov[f] = lu.solve(e)[3 * f:3 * f + 3]
         return x.reshape(-1, 3), cov
+
+
+def laser_constraints(graph: FrameGraph, frames: dict[str, NDArray]) -> int:
+    """Add every frame's logged laser fix (frames: scan-log frame arrays, in graph order, with laser_x_m,
+    laser_y_m, laser_phi_rad and their *_sigma_*) as absolute coordinate constraints; coordinates without a
+    sound fix are skipped (a version 1 log has none). Returns how many frames got at least one."""
+    fixed = np.zeros(graph.n_frames, bool)
+    for axis, (value_key, sigma_key) in enumerate((("laser_x_m", "laser_x_sigma_m"), ("laser_y_m", "laser_y_sigma_m"),
+                                                   ("laser_phi_rad", "laser_phi_sigma_rad"))):
+        if value_key not in frames or sigma_key not in frames:
+            continue
+        value = np.asarray(frames[value_key], dtype=np.float64)
+        sigma = np.asarray(frames[sigma_key], dtype=np.float64)
+        ok = np.isfinite(value) & np.isfinite(sigma) & (sigma > 0)
+        if ok.any():
+            graph.add_coordinate(np.flatnonzero(ok), axis, value[ok], np.maximum(sigma[ok], LASER_SIGMA_FLOOR[axis]))
+            fixed |= ok
+    return int(fixed.sum())
 
 
 def seam_error(poses_est: ArrayLike, poses_true: ArrayLike, border_points: ArrayLike,

@@ -3,7 +3,8 @@
 File format (SQLite 3, journal_mode=WAL, synchronous=FULL). One transaction per batch; a batch is one whole
 pass (its `passes` row and all its `samples` rows) or one frame row. A crash, power loss or `kill -9` therefore
 loses at most the batch that was being written; what is in the file is always whole passes. Format version
-`arproj-scanlog/1` (meta key `format`).
+`arproj-scanlog/2` (meta key `format`); version 1 logs (no laser columns) are still read, their laser values
+come back as NaN.
 
 Coordinates: wall metres (x right, y up from the wall's lower-left corner, the `wall` frame) unless a name says
 `drive_`: drive coordinates (u, v) are metres along the xy linear drives from the frame's origin (GRBL
@@ -12,7 +13,7 @@ machine position / 1000). A frame pose (x, y, phi) maps drive to wall coordinate
 
 Tables
   meta(key TEXT PRIMARY KEY, value TEXT)        values are JSON:
-      format            "arproj-scanlog/1"
+      format            "arproj-scanlog/2"
       created           ISO-8601 UTC time the log was created
       wall_fingerprint  sha256 of the wall content (scanner.wall.Wall.fingerprint); a scan never mixes walls
       wall_name, wall_path, wall_width_m, wall_height_m
@@ -27,7 +28,12 @@ Tables
          cmd_x_m, cmd_y_m, cmd_phi_rad,                       frame pose the planner commanded
          est_x_m, est_y_m, est_phi_rad, cov_json TEXT,        localization estimate and its 3x3 covariance
                                                               (row-major JSON, order x, y, phi; m², rad²)
-         true_x_m, true_y_m, true_phi_rad)                    simulation truth (NULL on real hardware)
+         true_x_m, true_y_m, true_phi_rad,                    simulation truth (NULL on real hardware)
+         laser_x_m, laser_x_sigma_m,                          the 2-D lasers' fix when the robot aligned
+         laser_y_m, laser_y_sigma_m,                          (scanner.laser): frame pose x, y, φ against the
+         laser_phi_rad, laser_phi_sigma_rad,                  side walls and floor, distance to and yaw
+         laser_dist_m, laser_dist_sigma_m,                    against the scanned wall, each with its 1σ;
+         laser_yaw_rad, laser_yaw_sigma_rad)                  NULL without a fix (format 2 only)
   passes(pass_id INTEGER PRIMARY KEY, frame_id, stage TEXT,   stage: raster | coarse | confirm | trace
          axis TEXT, direction INTEGER,                        axis 'x' (moves along drive u) or 'y' (along v);
                                                               direction +1 increasing, -1 decreasing coordinate
@@ -63,8 +69,10 @@ from typing import Any
 import numpy as np
 
 from geometry.errors import InputError
+from scanner.laser import LASER_KEYS
 
-FORMAT = "arproj-scanlog/1"
+FORMAT = "arproj-scanlog/2"
+READABLE_FORMATS = frozenset({"arproj-scanlog/1", FORMAT})  # version 1: frames without the laser columns
 
 SAMPLE_COLUMNS: tuple[str, ...] = (
     "seq", "time_s", "frame_id", "pass_id", "drive_u_m", "drive_v_m", "cmd_x_m", "cmd_y_m", "x_m", "y_m",
@@ -73,7 +81,7 @@ SAMPLE_COLUMNS: tuple[str, ...] = (
 INT_SAMPLE_COLUMNS = frozenset({"seq", "frame_id", "pass_id", "axis", "direction"})
 FRAME_COLUMNS: tuple[str, ...] = (
     "frame_id", "time_s", "cmd_x_m", "cmd_y_m", "cmd_phi_rad", "est_x_m", "est_y_m", "est_phi_rad", "cov_json",
-    "true_x_m", "true_y_m", "true_phi_rad",
+    "true_x_m", "true_y_m", "true_phi_rad", *LASER_KEYS,
 )
 PASS_COLUMNS: tuple[str, ...] = (
     "pass_id", "frame_id", "stage", "axis", "direction", "start_u_m", "start_v_m", "end_u_m", "end_v_m",
@@ -85,7 +93,7 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS frames (frame_id INTEGER PRIMARY KEY, time_s REAL NOT NULL,
     cmd_x_m REAL NOT NULL, cmd_y_m REAL NOT NULL, cmd_phi_rad REAL NOT NULL,
     est_x_m REAL NOT NULL, est_y_m REAL NOT NULL, est_phi_rad REAL NOT NULL, cov_json TEXT NOT NULL,
-    true_x_m REAL, true_y_m REAL, true_phi_rad REAL);
+    true_x_m REAL, true_y_m REAL, true_phi_rad REAL, {", ".join(k + " REAL" for k in LASER_KEYS)});
 CREATE TABLE IF NOT EXISTS passes (pass_id INTEGER PRIMARY KEY, frame_id INTEGER NOT NULL, stage TEXT NOT NULL,
     axis TEXT NOT NULL, direction INTEGER NOT NULL, start_u_m REAL NOT NULL, start_v_m REAL NOT NULL,
     end_u_m REAL NOT NULL, end_v_m REAL NOT NULL, t_start_s REAL NOT NULL, t_end_s REAL NOT NULL,
@@ -105,6 +113,9 @@ class ScanLog:
         self._db = connection
         self.writable = writable
         self.meta = self._read_meta()
+        # columns the frames table really has (a version 1 log lacks the laser columns)
+        present = {r[1] for r in connection.execute("PRAGMA table_info(frames)")}
+        self._frame_columns = tuple(c for c in FRAME_COLUMNS if c in present) if present else FRAME_COLUMNS
 
     # ------------------------------------------------------------------ opening
     @classmethod
@@ -143,8 +154,9 @@ class ScanLog:
         if not {"meta", "frames", "passes", "samples"} <= names:
             raise InputError(f"{path}: not a scan log (tables meta/frames/passes/samples missing)")
         log = cls(path, db, writable)
-        if log.meta.get("format") != FORMAT:
-            raise InputError(f"{path}: meta format = {log.meta.get('format')!r}, expected {FORMAT!r}")
+        if log.meta.get("format") not in READABLE_FORMATS:
+            raise InputError(f"{path}: meta format = {log.meta.get('format')!r}, expected one of "
+                             f"{sorted(READABLE_FORMATS)}", "is it a scan log from a newer arproj? update arproj")
         return log
 
     def close(self) -> None:
@@ -182,11 +194,13 @@ class ScanLog:
         """Record a frame (keys as FRAME_COLUMNS; `cov` (3, 3) instead of cov_json)."""
         row = dict(frame)
         row["cov_json"] = json.dumps(np.asarray(row.pop("cov"), dtype=float).reshape(9).tolist())
-        for key in ("true_x_m", "true_y_m", "true_phi_rad"):
-            row.setdefault(key, None)
+        for key in ("true_x_m", "true_y_m", "true_phi_rad", *LASER_KEYS):
+            value = row.get(key)
+            row[key] = None if value is None or not np.isfinite(value) else float(value)
+        cols = self._frame_columns
         with self._db:
-            self._db.execute(f"INSERT INTO frames({', '.join(FRAME_COLUMNS)}) VALUES "
-                             f"({', '.join('?' * len(FRAME_COLUMNS))})", [row[c] for c in FRAME_COLUMNS])
+            self._db.execute(f"INSERT INTO frames({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})",
+                             [row[c] for c in cols])
 
     def append_pass(self, pass_row: Mapping[str, Any], samples: Mapping[str, np.ndarray]) -> None:
         """Record one whole pass and its samples in one transaction.
@@ -239,9 +253,10 @@ class ScanLog:
 
     def frames(self) -> dict[str, np.ndarray]:
         """Frames ordered by id: arrays per FRAME_COLUMNS (cov_json replaced by cov (n, 3, 3))."""
-        rows = self._db.execute(f"SELECT {', '.join(FRAME_COLUMNS)} FROM frames ORDER BY frame_id").fetchall()
-        out: dict[str, np.ndarray] = {}
-        for i, c in enumerate(FRAME_COLUMNS):
+        cols = self._frame_columns
+        rows = self._db.execute(f"SELECT {', '.join(cols)} FROM frames ORDER BY frame_id").fetchall()
+        out: dict[str, np.ndarray] = {c: np.full(len(rows), np.nan) for c in FRAME_COLUMNS if c not in cols}
+        for i, c in enumerate(cols):
             if c == "cov_json":
                 out["cov"] = np.array([json.loads(r[i]) for r in rows], dtype=np.float64).reshape(-1, 3, 3)
             elif c == "frame_id":

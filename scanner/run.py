@@ -152,6 +152,8 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
                    "cov": report.cov}
             if report.true is not None:
                 row.update(true_x_m=report.true[0], true_y_m=report.true[1], true_phi_rad=report.true[2])
+            if report.laser is not None:
+                row.update(report.laser)
             if log is not None:
                 log.append_frame(row)
         frame_rows.append(row)
@@ -277,7 +279,7 @@ def open_for_resume(log_path: str | Path, wall_path: str | Path | None = None) -
 
 
 def simulated_site(wall: Wall, sensor: SensorConfig, drives: DriveConfig, seed: int) -> tuple[SimWorld, SimRobot]:
-    return SimWorld(wall, sensor, drives, seed), SimRobot(drives, seed)
+    return SimWorld(wall, sensor, drives, seed), SimRobot(drives, seed, wall.width_m)
 
 
 def config_from_meta(meta: dict[str, Any]) -> tuple[SensorConfig, DriveConfig]:

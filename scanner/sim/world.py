@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from geometry.errors import InputError
+from scanner.laser import LaserConfig, simulate_fix
 from scanner.plan import DriveConfig, FrameTarget, frame_pose_apply, move_position
 from scanner.sensor_model import SensorConfig, SensorModel
 from scanner.wall import Wall
@@ -29,14 +31,19 @@ class FrameReport:
     estimate: Pose
     cov: np.ndarray  # (3, 3): x, y (m²), phi (rad²)
     true: Pose | None
+    laser: dict[str, float] | None = None  # the 2-D laser's fix (scanner.laser.LASER_KEYS), if any
 
 
 class SimRobot:
-    """The platform: stops near the commanded frame pose; its localization estimates where it stopped."""
+    """The platform: stops near the commanded frame pose; its localization estimates where it stopped; with
+    the room's wall width given, its 2-D laser also measures the frame's x against the side walls."""
 
-    def __init__(self, drives: DriveConfig, seed: int) -> None:
+    def __init__(self, drives: DriveConfig, seed: int, wall_width_m: float | None = None,
+                 laser: LaserConfig | None = None) -> None:
         self.drives = drives
         self.seed = seed
+        self.wall_width_m = wall_width_m
+        self.laser = laser or LaserConfig()
 
     def go_to(self, frame: FrameTarget) -> FrameReport:
         d = self.drives
@@ -48,7 +55,15 @@ class SimRobot:
         estimate = (true[0] + d.loc_sigma_m * err[3], true[1] + d.loc_sigma_m * err[4],
                     true[2] + d.loc_sigma_rad * err[5])
         cov = np.diag([d.loc_sigma_m**2, d.loc_sigma_m**2, d.loc_sigma_rad**2])
-        return FrameReport(commanded, estimate, cov, true)
+        fix = None
+        if self.wall_width_m is not None:  # own stream: the pose draws above stay as they were
+            try:
+                fix, _ = simulate_fix(true, self.wall_width_m,
+                                      np.random.default_rng([self.seed, frame.frame_id, 103]), self.laser)
+            except InputError:
+                fix = None  # no fix (walls not in view): the frame keeps its localization alone
+
+        return FrameReport(commanded, estimate, cov, true, fix)
 
 
 class SimWorld:

@@ -177,3 +177,39 @@ def test_cli_bad_log_is_one_line_with_status_2(tmp_path):
     assert run.returncode == 2
     errors = [ln for ln in run.stderr.splitlines() if "error" in ln]
     assert len(errors) == 1 and str(junk) in errors[0] and "Traceback" not in run.stderr
+
+
+SEAM_NOISE = (0.020, 0.010, np.radians(1.0))  # the frame pose noise: x, y, φ
+SEAM_TARGET_MM = 2.0
+
+
+def _seams_mm(data, poses):
+    from mapping.stitching import seam_error
+
+    f = data.frames
+    true = np.column_stack([f["true_x_m"], f["true_y_m"], f["true_phi_rad"]])
+    pairs, border = [], []
+    for i in range(len(true) - 1):
+        c, s = np.cos(true[i, 2]), np.sin(true[i, 2])
+        for v in np.linspace(0.1, 1.9, 7):
+            border.append([true[i, 0] + c * 0.35 - s * v, true[i, 1] + s * 0.35 + c * v])
+            pairs.append((i, i + 1))
+    return seam_error(poses, true, border, pairs) * 1000
+
+
+def test_map_of_a_log_stitches_with_the_logged_laser_fix(tmp_path):
+    from mapping.pipeline import stitch_frames
+    from scanner.wall import random_wall
+
+    wall = random_wall(501)
+    with_laser = simulate_scan(wall, seed=501, sample_step_m=0.004, line_spacing_m=0.02, loc_sigma=SEAM_NOISE)
+    data = load_scan(write_log(with_laser, tmp_path / "scan.db"))  # through the file: what `arproj map` reads
+    poses, notes = stitch_frames(data)
+    assert any("laser fix" in n for n in notes)
+    est = np.column_stack([data.frames["est_x_m"], data.frames["est_y_m"], data.frames["est_phi_rad"]])
+    before, after = _seams_mm(data, est), _seams_mm(data, poses)
+    assert after.mean() < SEAM_TARGET_MM < before.mean()
+    # Without the laser columns (a version 1 log) the same scan stitches far worse
+    no_laser = simulate_scan(wall, seed=501, sample_step_m=0.004, line_spacing_m=0.02, loc_sigma=SEAM_NOISE,
+                             laser=False)
+    assert _seams_mm(no_laser, stitch_frames(no_laser)[0]).mean() > 3 * after.mean()

@@ -69,3 +69,33 @@ def test_log_from_another_wall_and_not_a_log(tmp_path):
     junk.write_bytes(b"this is not sqlite at all" * 100)
     with pytest.raises(InputError, match="not a scan log"):
         ScanLog.open(junk)
+
+
+def test_laser_fix_round_trip_and_version_1_logs_stay_readable(tmp_path):
+    from scanner.laser import LASER_KEYS
+
+    frame = {"frame_id": 0, "time_s": 0.0, "cmd_x_m": 0.0, "cmd_y_m": 0.0, "cmd_phi_rad": 0.0, "est_x_m": 0.0,
+             "est_y_m": 0.0, "est_phi_rad": 0.0, "cov": np.eye(3) * 1e-6}
+    fix = {k: 0.001 * (i + 1) for i, k in enumerate(LASER_KEYS)}
+    log = ScanLog.create(tmp_path / "new.db", {"wall_fingerprint": "abc"})
+    log.append_frame({**frame, **fix})
+    log.append_frame({**frame, "frame_id": 1})  # no fix: NULL
+    log.close()
+    with ScanLog.open(tmp_path / "new.db") as back:
+        assert back.meta["format"] == "arproj-scanlog/2"
+        f = back.frames()
+        for k, v in fix.items():
+            assert f[k][0] == pytest.approx(v) and np.isnan(f[k][1])
+    # A version 1 log: frames without the laser columns
+    log = ScanLog.create(tmp_path / "old.db", {"wall_fingerprint": "abc"})
+    log.close()
+    db = sqlite3.connect(tmp_path / "old.db")
+    for k in LASER_KEYS:
+        db.execute(f"ALTER TABLE frames DROP COLUMN {k}")
+    db.execute("UPDATE meta SET value = '\"arproj-scanlog/1\"' WHERE key = 'format'")
+    db.commit()
+    db.close()
+    with ScanLog.open(tmp_path / "old.db", writable=True) as old:
+        old.append_frame({**frame, **fix})  # resuming an old log: the fix is dropped, the frame kept
+        f = old.frames()
+        assert f["frame_id"].tolist() == [0] and all(np.isnan(f[k][0]) for k in LASER_KEYS)

@@ -136,3 +136,20 @@ def test_cli_errors_are_one_line(tmp_path):
     assert "height_m = 3.5 exceeds the drives' reach" in done.stderr
     assert "Traceback" not in done.stderr
     assert not (tmp_path / "x.db").exists()
+
+
+def test_frames_in_the_log_carry_the_laser_fix(tmp_path):
+    from scanner.laser import LASER_KEYS
+
+    log = _new_log(tmp_path / "scan.db", load_wall(SMALL), "dense", 3)
+    sensor, drives = SensorConfig(), DriveConfig()
+    world, robot = simulated_site(load_wall(SMALL), sensor, drives, 3)
+    run_scan(load_wall(SMALL), DirectBackend(world), robot, sensor=sensor, drives=drives, log=log)
+    log.close()
+    with ScanLog.open(tmp_path / "scan.db") as back:
+        f = back.frames()
+    assert all(np.isfinite(f[k]).all() for k in LASER_KEYS)
+    for axis, key in ((0, "laser_x_m"), (1, "laser_y_m"), (2, "laser_phi_rad")):
+        truth = f[("true_x_m", "true_y_m", "true_phi_rad")[axis]]
+        sigma = f[key.replace("_m", "_sigma_m") if axis < 2 else "laser_phi_sigma_rad"]
+        assert np.all(np.abs(f[key] - truth) < 5 * sigma)

@@ -1,0 +1,199 @@
+"""The robot's two 2-D laser scanners (paper §4.2): what they see of the room when the robot aligns to the wall.
+
+Both sit at the drive frame's origin (their mounting offsets are calibrated out) and see a rectangle of room:
+  * the horizontal laser scans the plane parallel to the floor. Coordinates (x along the wall = wall frame x,
+    z away from the wall): scanned wall z = 0, side walls x = −m and x = W + m (m = side_margin_m), back wall
+    z = room_depth_m. It gives the frame's x (against the left side wall), its distance to the wall and its
+    yaw against the wall;
+  * the vertical laser scans the plane parallel to the wall. Coordinates (x, y = wall frame): floor
+    y = −floor_margin_m, the same side walls, ceiling room_height_m above the floor. It gives the frame's x
+    again, its height y above the floor and its roll φ in the wall plane (the floor line's slope).
+A horizontal laser alone cannot see y or φ, and φ matters most (1° turns a 2 m tall frame's top by 35 mm).
+
+Each scan is reduced the same way (`measure_fix`): RANSAC + least-squares lines for the reference surface
+behind the laser (wall or floor) and the left side wall; their corner gives the position along the surface,
+the reference line the distance and angle. Standard deviations come from the line fits' residuals (σ²(XᵀX)⁻¹
+propagated through the corner geometry), not assumed.
+
+Simulation (`simulate_scan_2d`): exact ray casting of the rectangle, Gaussian range noise, a fraction of
+outliers (returns from clutter in front of the surfaces: uniform between 5 % of and the true range),
+deterministic from the generator given.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from geometry.errors import InputError
+
+LINE_INLIER_M = 0.02  # RANSAC inlier distance for wall lines (several range-noise σ; outliers lie far)
+LINE_MAX_TILT_RAD = math.radians(15.0)  # a wall line must run within this of its expected direction
+LINE_MIN_POINTS = 20  # fewer inliers cannot give a trustworthy wall line
+RANSAC_ITERATIONS = 300
+
+# Frame columns the laser adds to the scan log (NaN/NULL when no laser fix is available)
+LASER_KEYS: tuple[str, ...] = ("laser_x_m", "laser_x_sigma_m", "laser_y_m", "laser_y_sigma_m",
+                               "laser_phi_rad", "laser_phi_sigma_rad", "laser_dist_m", "laser_dist_sigma_m",
+                               "laser_yaw_rad", "laser_yaw_sigma_rad")
+_LINE_KEYS = ("x", "x_sigma", "dist", "dist_sigma", "angle", "angle_sigma")
+
+
+@dataclass(frozen=True)
+class LaserConfig:
+    """A typical 2-D safety/measurement laser (e.g. SICK TiM/LMS class) and the simulated room."""
+
+    angular_step_rad: float = math.radians(0.25)
+    range_sigma_m: float = 0.003
+    max_range_m: float = 10.0
+    outlier_fraction: float = 0.02
+    room_depth_m: float = 4.0
+    room_height_m: float = 2.7  # floor to ceiling
+    floor_margin_m: float = 0.3  # the floor lies this far below the wall frame's y = 0 (site survey)
+    side_margin_m: float = 0.3  # the side walls stand this far left of x = 0 and right of x = W (the scanned
+    # area lies inside the room); the site survey gives it, the fix reports x in wall coordinates with it
+    standoff_m: float = 0.5  # laser (drive frame origin) distance from the wall when aligned
+    standoff_sigma_m: float = 0.01  # how well the robot keeps that distance
+    yaw_sigma_rad: float = math.radians(0.5)  # how well the robot aligns to the wall
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+def simulate_scan_2d(x_m: float, standoff_m: float, yaw_rad: float, wall_width_m: float, depth_m: float,
+                     cfg: LaserConfig, rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """One 360° scan from a laser standoff_m in front of the reference surface (wall or floor) at x_m, turned
+    by yaw_rad; the rectangle is depth_m deep. Returns (angles (n,) rad in the laser frame, ranges (n,) m;
+    NaN where nothing is within max_range_m)."""
+    angles = np.arange(-math.pi, math.pi, cfg.angular_step_rad)
+    world = angles + yaw_rad
+    d = np.column_stack([np.cos(world), np.sin(world)])
+    o = np.array([x_m, standoff_m])
+    L, R, D = -cfg.side_margin_m, wall_width_m + cfg.side_margin_m, depth_m
+    best = np.full(angles.shape, np.inf)
+    # (axis of the surface's constant coordinate, its value, other-coordinate span)
+    for axis, value, lo, hi in ((1, 0.0, L, R), (0, L, 0.0, D), (0, R, 0.0, D), (1, D, L, R)):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (value - o[axis]) / d[:, axis]
+        other = o[1 - axis] + t * d[:, 1 - axis]
+        hit = (t > 0) & (other >= lo) & (other <= hi)
+        best = np.where(hit & (t < best), t, best)
+    ranges = best + cfg.range_sigma_m * rng.standard_normal(angles.shape)
+    outlier = rng.random(angles.shape) < cfg.outlier_fraction
+    ranges[outlier] = rng.uniform(0.05, 1.0, int(outlier.sum())) * np.minimum(best[outlier], cfg.max_range_m)
+    ranges[~np.isfinite(best) | (ranges > cfg.max_range_m)] = np.nan
+    return angles, ranges
+
+
+def _ransac_line(p: NDArray[np.float64], direction: NDArray[np.float64], rng: np.random.Generator) -> NDArray[np.bool_]:
+    """Inliers (n,) of the line through p (n, 2) with most points within LINE_INLIER_M whose direction is
+    within LINE_MAX_TILT_RAD of `direction` (unit (2,))."""
+    if len(p) < LINE_MIN_POINTS:
+        return np.zeros(len(p), bool)
+    pairs = rng.integers(0, len(p), size=(RANSAC_ITERATIONS, 2))
+    a, b = p[pairs[:, 0]], p[pairs[:, 1]]
+    v = b - a
+    length = np.linalg.norm(v, axis=1)
+    ok = length > 0.05
+    v = v[ok] / length[ok, None]
+    a = a[ok]
+    ok = np.abs(v @ direction) > math.cos(LINE_MAX_TILT_RAD)
+    v, a = v[ok], a[ok]
+    if len(v) == 0:
+        return np.zeros(len(p), bool)
+    n = np.column_stack([-v[:, 1], v[:, 0]])
+    dist = np.abs(np.einsum("kj,knj->kn", n, p[None, :, :] - a[:, None, :]))
+    counts = (dist < LINE_INLIER_M).sum(axis=1)
+    return dist[int(np.argmax(counts))] < LINE_INLIER_M
+
+
+def _fit_line(p: NDArray[np.float64], inliers: NDArray[np.bool_], swap: bool, what: str
+              ) -> tuple[float, float, float, NDArray[np.float64]]:
+    """Least squares s = c0 + c1 (r − r̄) over the inliers, refined twice at 3× rms. r, s = a, b (or b, a if
+    swap). Returns (c0, c1, r̄, covariance (2, 2) of (c0, c1))."""
+    r, s = (p[:, 1], p[:, 0]) if swap else (p[:, 0], p[:, 1])
+    keep = inliers.copy()
+    for _ in range(3):
+        if keep.sum() < LINE_MIN_POINTS:
+            raise InputError(f"laser: only {int(keep.sum())} points on the {what}, too few for a line "
+                             f"(need {LINE_MIN_POINTS})", "clear the laser's view of the walls")
+        rm = float(r[keep].mean())
+        X = np.column_stack([np.ones(int(keep.sum())), r[keep] - rm])
+        coef, *_ = np.linalg.lstsq(X, s[keep], rcond=None)
+        resid = s - coef[0] - coef[1] * (r - rm)
+        rms = float(np.sqrt(np.mean(resid[keep] ** 2)))
+        keep = inliers & (np.abs(resid) < max(3.0 * rms, 1e-4))
+    sigma2 = float(np.sum(resid[keep] ** 2)) / max(int(keep.sum()) - 2, 1)
+    X = np.column_stack([np.ones(int(keep.sum())), r[keep] - rm])
+    return float(coef[0]), float(coef[1]), rm, sigma2 * np.linalg.inv(X.T @ X)
+
+
+def _fix_from_lines(e: NDArray[np.float64], c: NDArray[np.float64], am: float, bm: float) -> NDArray[np.float64]:
+    """(x along the wall, distance to the wall, yaw) from the wall line b = e0 + e1 (a − am) and the left side
+    wall line a = c0 + c1 (b − bm), both in the laser frame."""
+    e0, e1 = e[0] - e[1] * am, e[1]  # b = e0 + e1 a
+    c0, c1 = c[0] - c[1] * bm, c[1]  # a = c0 + c1 b
+    a_corner = (c0 + c1 * e0) / (1.0 - c1 * e1)
+    b_corner = e0 + e1 * a_corner
+    norm = math.hypot(1.0, e1)
+    x = -(a_corner + e1 * b_corner) / norm  # origin's foot minus corner, along the wall direction (1, e1)/norm
+    return np.array([x, -e0 / norm, -math.atan(e1)])
+
+
+def measure_fix(angles: NDArray[np.float64], ranges: NDArray[np.float64], side_margin_m: float,
+                seed: int = 0, what: str = "scanned wall") -> dict[str, float]:
+    """One scan's fix: dict x, dist, angle (m, m, rad) and their 1σ x_sigma, dist_sigma, angle_sigma. x is in
+    wall coordinates: the distance along the reference surface from the left side wall minus side_margin_m;
+    dist the distance to the reference surface, angle the laser's turn against it. Raises InputError when
+    the reference surface (`what`) or the left side wall cannot be found."""
+    ok = np.isfinite(ranges)
+    p = np.column_stack([ranges[ok] * np.cos(angles[ok]), ranges[ok] * np.sin(angles[ok])])
+    rng = np.random.default_rng(seed)
+    behind = p[:, 1] < 0  # the scanned wall lies behind the laser (b < 0)
+    wall_in = np.zeros(len(p), bool)
+    wall_in[behind] = _ransac_line(p[behind], np.array([1.0, 0.0]), rng)
+    e0, e1, am, cov_e = _fit_line(p, wall_in, swap=False, what=what)
+    left = (p[:, 0] < 0) & ~wall_in & (p[:, 1] > e0 + e1 * (p[:, 0] - am) + LINE_INLIER_M)
+    side_in = np.zeros(len(p), bool)
+    side_in[left] = _ransac_line(p[left], np.array([0.0, 1.0]), rng)
+    c0, c1, bm, cov_c = _fit_line(p, side_in, swap=True, what="left side wall")
+    params = np.array([e0, e1, c0, c1])
+    cov = np.zeros((4, 4))
+    cov[:2, :2], cov[2:, 2:] = cov_e, cov_c
+
+    def f(q: NDArray[np.float64]) -> NDArray[np.float64]:
+        return _fix_from_lines(q[:2], q[2:], am, bm)
+
+    value = f(params)
+    J = np.empty((3, 4))
+    for k in range(4):
+        h = 1e-6 * max(1.0, abs(params[k]))
+        dq = np.zeros(4)
+        dq[k] = h
+        J[:, k] = (f(params + dq) - f(params - dq)) / (2 * h)
+    sig = np.sqrt(np.diag(J @ cov @ J.T))
+    return dict(zip(_LINE_KEYS, (value[0] - side_margin_m, sig[0], value[1], sig[1], value[2], sig[2]), strict=True))
+
+
+def simulate_fix(pose: tuple[float, float, float], wall_width_m: float, rng: np.random.Generator,
+                 cfg: LaserConfig | None = None) -> tuple[dict[str, float], tuple[float, float]]:
+    """A simulated robot alignment with the frame at its true pose (x m, y m, φ rad): the fix of both lasers
+    (dict of LASER_KEYS; x is the inverse-variance mean of both lasers' x) and the true (standoff m, yaw rad)."""
+    cfg = cfg or LaserConfig()
+    x, y, phi = (float(v) for v in pose)
+    standoff = cfg.standoff_m + cfg.standoff_sigma_m * float(rng.standard_normal())
+    yaw = cfg.yaw_sigma_rad * float(rng.standard_normal())
+    angles, ranges = simulate_scan_2d(x, standoff, yaw, wall_width_m, cfg.room_depth_m, cfg, rng)
+    h = measure_fix(angles, ranges, cfg.side_margin_m, int(rng.integers(0, 2**31)), "scanned wall")
+    angles, ranges = simulate_scan_2d(x, y + cfg.floor_margin_m, phi, wall_width_m, cfg.room_height_m, cfg, rng)
+    v = measure_fix(angles, ranges, cfg.side_margin_m, int(rng.integers(0, 2**31)), "floor")
+    w = np.array([h["x_sigma"], v["x_sigma"]]) ** -2.0
+    fix = {"laser_x_m": float(w @ [h["x"], v["x"]] / w.sum()), "laser_x_sigma_m": float(w.sum() ** -0.5),
+           "laser_y_m": v["dist"] - cfg.floor_margin_m, "laser_y_sigma_m": v["dist_sigma"],
+           "laser_phi_rad": v["angle"], "laser_phi_sigma_rad": v["angle_sigma"],
+           "laser_dist_m": h["dist"], "laser_dist_sigma_m": h["dist_sigma"],
+           "laser_yaw_rad": h["angle"], "laser_yaw_sigma_rad": h["angle_sigma"]}
+    return fix, (standoff, yaw)

@@ -1,0 +1,48 @@
+"""The simulated 2-D lasers and their fix: against the simulated truth, σ consistent with the errors."""
+
+import math
+
+import numpy as np
+import pytest
+
+from geometry.errors import InputError
+from scanner.laser import LaserConfig, measure_fix, simulate_fix, simulate_scan_2d
+
+Z_MAX = 4.5  # largest normalised error allowed over the trials (σ must describe the real errors)
+
+
+def test_fix_matches_the_true_pose_within_its_sigma():
+    z = []
+    for k in range(15):
+        rng = np.random.default_rng([k, 103])
+        true = (0.35 * k % 2.8, 0.01 * math.sin(k), 0.003 * math.cos(k))
+        fix, (standoff, yaw) = simulate_fix(true, 2.8, rng)
+        assert 5e-5 < fix["laser_x_sigma_m"] < 0.001 and 2e-5 < fix["laser_y_sigma_m"] < 0.001
+        assert fix["laser_phi_sigma_rad"] < math.radians(0.05)
+        z.append([(fix["laser_x_m"] - true[0]) / fix["laser_x_sigma_m"],
+                  (fix["laser_y_m"] - true[1]) / fix["laser_y_sigma_m"],
+                  (fix["laser_phi_rad"] - true[2]) / fix["laser_phi_sigma_rad"],
+                  (fix["laser_dist_m"] - standoff) / fix["laser_dist_sigma_m"],
+                  (fix["laser_yaw_rad"] - yaw) / fix["laser_yaw_sigma_rad"]])
+    z = np.abs(np.array(z))
+    assert z.max() < Z_MAX
+    assert 0.4 < float(np.sqrt(np.mean(z**2))) < 2.0  # σ neither far too small nor far too large
+
+
+def test_scan_has_noise_and_outliers_and_is_deterministic():
+    cfg = LaserConfig()
+    a1, r1 = simulate_scan_2d(1.0, 0.5, 0.0, 2.5, cfg.room_depth_m, cfg, np.random.default_rng(1))
+    _, r2 = simulate_scan_2d(1.0, 0.5, 0.0, 2.5, cfg.room_depth_m, cfg, np.random.default_rng(1))
+    np.testing.assert_array_equal(r1, r2)
+    behind = np.abs(a1 + math.pi / 2) < math.radians(20)  # rays to the wall straight behind: range 0.5/cos
+    err = r1[behind] - 0.5 / np.cos(a1[behind] + math.pi / 2)
+    assert 0.001 < float(np.median(np.abs(err))) < 0.005  # a few mm of range noise
+    assert np.mean(np.abs(err) > 0.03) > 0.0  # some outliers
+    assert abs(a1[1] - a1[0] - math.radians(0.25)) < 1e-12
+
+
+def test_fix_without_a_visible_side_wall_raises():
+    cfg = LaserConfig(max_range_m=0.6)
+    angles, ranges = simulate_scan_2d(1.5, 0.5, 0.0, 2.5, cfg.room_depth_m, cfg, np.random.default_rng(2))
+    with pytest.raises(InputError, match="side wall"):
+        measure_fix(angles, ranges, cfg.side_margin_m)
