@@ -15,6 +15,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import cv2
@@ -29,6 +31,7 @@ from geometry.intrinsics import Intrinsics
 RECTIFY_PASSES = 2
 MIN_RECT_SQUARE_PX = 14.0   # a square spans at least this many pixels in the rectified image
 MAP_STEP_PX = 8             # the rectifying map is computed on this grid and interpolated
+FLAT_FIELD_STEP = 3         # the black/white envelopes are computed on this grid (odd) and interpolated
 
 
 @dataclass
@@ -37,7 +40,8 @@ class Detection:
 
     corner_ids: (n,) int indices into pattern.corner_grid; pixels: (n, 2) float64 raw (distorted) camera
     pixels; normalized: (n, 2) undistorted normalized coordinates (x/z, y/z); reason: why nothing usable
-    was found (None when corners were found); warnings: things worth knowing that did not stop detection.
+    was found (None when corners were found); warnings: things worth knowing that did not stop detection;
+    kept_fraction: the fraction of the corners in view that were refined (an even subset; see detect).
     """
 
     camera: str
@@ -48,6 +52,7 @@ class Detection:
     contrast: float = float("nan")
     clipped_fraction: float = float("nan")
     reason: str | None = None
+    kept_fraction: float = 1.0
     warnings: list[str] = field(default_factory=list)
 
     @property
@@ -126,14 +131,16 @@ class _Rectifier:
         s = pattern.square_px
         self.margin_px = s  # projector pixels around the board
         self.origin = np.array(pattern.origin_px, dtype=np.float64) - self.margin_px - 0.5
-        self.size = (int(np.ceil((pattern.cols * s + 2 * self.margin_px) * scale)),
-                     int(np.ceil((pattern.rows * s + 2 * self.margin_px) * scale)))
-        # coarse samples sit where cv2.resize (half-pixel centres) puts them when scaling up by MAP_STEP_PX;
-        # the outermost half step is extrapolated flat, inside the margin
+        width = int(np.ceil((pattern.cols * s + 2 * self.margin_px) * scale))
+        height = int(np.ceil((pattern.rows * s + 2 * self.margin_px) * scale))
+        # coarse samples sit where cv2.resize (half-pixel centres) puts them when scaling up by MAP_STEP_PX; the
+        # rectified image is a whole number of steps (a little beyond the margin), so the map needs no cropping
+        nx, ny = int(np.ceil(width / MAP_STEP_PX)) + 1, int(np.ceil(height / MAP_STEP_PX)) + 1
+        self.size = (nx * MAP_STEP_PX, ny * MAP_STEP_PX)
         half = (MAP_STEP_PX - 1) / 2.0
-        gx = np.arange(int(np.ceil(self.size[0] / MAP_STEP_PX)) + 1) * MAP_STEP_PX + half
-        gy = np.arange(int(np.ceil(self.size[1] / MAP_STEP_PX)) + 1) * MAP_STEP_PX + half
-        self.grid_shape = (len(gy), len(gx))
+        gx = np.arange(nx) * MAP_STEP_PX + half
+        gy = np.arange(ny) * MAP_STEP_PX + half
+        self.grid_shape = (ny, nx)
         u, v = np.meshgrid(gx, gy)
         # projector normalized coordinates of the coarse grid (cached with the rectifier)
         self.grid_norm = projector.rays(self.to_projector(np.column_stack([u.ravel(), v.ravel()])))[:, :2]
@@ -151,12 +158,8 @@ class _Rectifier:
     def warp(self, gray: NDArray[np.float32], H: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
         """(rectified image, valid mask) for the current H."""
         coarse = self.camera_px(H, self.grid_norm).reshape(*self.grid_shape, 2).astype(np.float32)
-        w, h = self.size
-        full = cv2.resize(coarse, (self.grid_shape[1] * MAP_STEP_PX, self.grid_shape[0] * MAP_STEP_PX),
-                          interpolation=cv2.INTER_LINEAR)
-        full = np.ascontiguousarray(full[:h, :w])
-        rect = cv2.remap(gray, full[..., 0], full[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                         borderValue=np.nan)
+        full = cv2.resize(coarse, self.size, interpolation=cv2.INTER_LINEAR)   # (h, w, 2): x and y maps
+        rect = cv2.remap(gray, full, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
         valid = np.isfinite(rect)
         return rect, valid
 
@@ -176,20 +179,78 @@ def _rectifier(pattern: CheckerPattern, projector: Intrinsics, camera: Intrinsic
 
 def _flat_field(rect: NDArray[np.float32], valid: NDArray[np.bool_], square: float) -> NDArray[np.float32]:
     """The rectified image with its local black and white levels stretched to 0 and 255 (envelopes: max and min
-    filters over about two squares, smoothed), so a brightness gradient cannot pull a corner aside."""
-    k = int(np.clip(2.2 * square, 5, 101)) | 1
-    img = np.where(valid, rect, 0.0).astype(np.float32)
+    filters over about two squares, smoothed), so a brightness gradient cannot pull a corner aside.
+
+    The envelopes are smooth over two squares, so they are computed on every FLAT_FIELD_STEP-th pixel (a
+    square still spans several samples, so max and min still reach its pure interior) and interpolated back:
+    the same envelopes for about 1/step² of the filtering."""
+    step = int(np.clip(square // 4, 1, FLAT_FIELD_STEP))
+    step -= 1 - step % 2  # odd, so the samples sit exactly where cv2.resize puts them when scaling back up
+    k = int(np.clip(2.2 * square / step, 3, 101)) | 1
+    start = (step - 1) // 2
+    sub_rect, sub_valid = rect[start::step, start::step], valid[start::step, start::step]
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (k, k))
-    white = cv2.blur(cv2.blur(cv2.dilate(img, kernel), (k, k)), (k, k))  # two box filters: a smooth envelope
-    black = cv2.blur(cv2.blur(cv2.erode(np.where(valid, rect, 255.0).astype(np.float32), kernel), (k, k)),
+    # two box filters: a smooth envelope; outside the camera image white counts as 0 and black as 255
+    white = cv2.blur(cv2.blur(cv2.dilate(np.where(sub_valid, sub_rect, 0.0).astype(np.float32), kernel), (k, k)),
                      (k, k))
-    return 255.0 * (img - black) / np.maximum(white - black, 1.0)
+    black = cv2.blur(cv2.blur(cv2.erode(np.where(sub_valid, sub_rect, 255.0).astype(np.float32), kernel), (k, k)),
+                     (k, k))
+    if step > 1:
+        white, black = (np.ascontiguousarray(_upsample(e, step, rect.shape)) for e in (white, black))
+    img = rect.copy()
+    cv2.patchNaNs(img, 0.0)  # outside the camera image (NaN in rect) reads as black
+    # 255 (img - black) / max(white - black, 1), in single passes
+    return cv2.divide(cv2.subtract(img, black), cv2.max(cv2.subtract(white, black), 1.0), scale=255.0)
+
+
+def _upsample(coarse: NDArray[np.float32], step: int, shape: tuple[int, ...]) -> NDArray[np.float32]:
+    """Bilinear interpolation of samples taken at pixels (step - 1) / 2 + k * step (step odd) back to an image
+    of shape (h, w), flat beyond the outermost samples (a view; not contiguous)."""
+    h, w = shape[:2]
+    ny, nx = -(-h // step), -(-w // step)
+    coarse = np.pad(coarse, ((0, ny - coarse.shape[0]), (0, nx - coarse.shape[1])), mode="edge")
+    return cv2.resize(coarse, (nx * step, ny * step), interpolation=cv2.INTER_LINEAR)[:h, :w]
+
+
+@contextmanager
+def single_threaded_opencv() -> Iterator[None]:
+    """OpenCV on one thread for a while. Its calls here work on images of a few hundred pixels, where handing
+    the work to a thread pool costs more CPU (waking and waiting) than it saves; on a shared robot computer the
+    CPU per estimate is what counts. The previous thread count is restored afterwards."""
+    previous = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(previous)
+
+
+# Kronecker (R2) sequence constants: frac(i a1 + j a2) spreads evenly over [0, 1) across any part of the grid
+_R2 = (0.7548776662466927, 0.5698402909980532)
+
+
+def _even_subset(pattern: CheckerPattern, fraction: float) -> NDArray[np.bool_]:
+    """(n,) a spatially even subset of about fraction of the pattern's corners (every corner when fraction is 1).
+    Subsets for different fractions are nested, so two cameras keep mostly the same corners."""
+    if fraction >= 1.0:
+        return np.ones(pattern.n_corners, dtype=bool)
+    i, j = pattern.corner_grid[:, 0], pattern.corner_grid[:, 1]
+    return np.mod(i * _R2[0] + j * _R2[1], 1.0) < fraction
 
 
 def detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, projector: Intrinsics,
-           camera_name: str = "camera") -> Detection:
+           camera_name: str = "camera", max_corners: int | None = limits.MAX_CORNERS) -> Detection:
     """Corners of pattern in a camera image (grey or RGB, uint8). Never raises on a bad picture: an empty
-    Detection carries the reason instead."""
+    Detection carries the reason instead.
+
+    max_corners: when more corners are in view, a spatially even subset of about this many is refined (the
+    plane's error grows a little and its reported bounds with it, for about half the work); None: all."""
+    with single_threaded_opencv():
+        return _detect(image, pattern, camera, projector, camera_name, max_corners)
+
+
+def _detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, projector: Intrinsics,
+            camera_name: str, max_corners: int | None) -> Detection:
     gray = _to_gray(image)
     if gray.shape != (camera.height, camera.width):
         raise InputError(f"{camera_name}: image is {gray.shape[1]}x{gray.shape[0]} but the calibration is for "
@@ -221,6 +282,8 @@ def detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, projecto
     contrast = np.zeros(n)
     white_clipped = np.zeros(n)
     max_shift = limits.MAX_CORNER_SHIFT_PX
+    subset: NDArray[np.bool_] | None = None  # corner subsampling, fixed in the first pass
+    kept_fraction = 1.0
     for _ in range(RECTIFY_PASSES):
         rect, valid = rectifier.warp(gray_f, H)
         flat = _flat_field(rect, valid, square)
@@ -231,6 +294,10 @@ def detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, projecto
         # the whole window must have come from inside the camera image
         whole = cv2.erode(valid.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_RECT, (2 * r + 1, 2 * r + 1)))
         idx = idx[whole[iy[idx], ix[idx]] > 0]
+        if subset is None:
+            kept_fraction = 1.0 if max_corners is None else min(1.0, max_corners / len(idx))
+            subset = _even_subset(pattern, kept_fraction)
+        idx = idx[subset[idx]]
         if len(idx) == 0:
             break
         pts = corners_rect[idx].astype(np.float32).reshape(-1, 1, 2).copy()
@@ -271,7 +338,8 @@ def detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, projecto
         return _empty(camera_name, _why_no_corners(gray, len(markers)), len(markers))
     ids = np.nonzero(accepted)[0]
     det = Detection(camera_name, ids, refined[ids], camera.rays(refined[ids])[:, :2], len(markers),
-                    float(np.median(contrast[ids])), float(np.mean(white_clipped[ids])))
+                    float(np.median(contrast[ids])), float(np.mean(white_clipped[ids])),
+                    kept_fraction=kept_fraction)
     if det.clipped_fraction > limits.MAX_CLIPPED_FRACTION:
         det.warnings.append(f"{camera_name} is over-exposed ({det.clipped_fraction:.0%} of the white squares "
                             "clip); lower the exposure")

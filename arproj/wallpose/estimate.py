@@ -155,7 +155,8 @@ def _erode_off_plane_border(model: MLModel, fit: MLFit, pattern: CheckerPattern)
 
     Where the pattern folds onto another surface (a room corner, a door frame) the corners just before the
     fold are found slightly off their place (their squares reach over the fold) and drag the plane with
-    them; one grid step of margin removes them."""
+    them; one grid step of margin removes them. With an even subset of the corners (detect's max_corners) the
+    neighbour across the fold is not always among them; the inlier gate catches what this misses."""
     off = model.seen_any & ~fit.inliers
     if not off.any():
         return fit

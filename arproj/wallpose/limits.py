@@ -11,6 +11,7 @@ MARKER_SPACING_SQUARES = 6      # roughly one coded marker block every this many
 
 # --- detection -------------------------------------------------------------------------------------------------
 MARKER_DETECT_MAX_PX = 800      # the marker detector runs on an image downscaled to at most this width
+MAX_CORNERS = 450               # more visible corners than this: an even subset is refined and fitted
 SUBPIX_ITERATIONS = 30
 SUBPIX_EPS_PX = 0.002
 MAX_CORNER_SHIFT_PX = 2.5       # refined corner farther than this from its prediction: rejected
@@ -26,6 +27,7 @@ MIN_PATTERN_CONTRAST = 15.0     # median white-black difference below this: low 
 MIN_CORNERS = 12                # fewer inlier corners than this: not enough evidence
 MIN_INLIER_FRACTION = 0.30      # fewer inliers among all matched corners: the pattern is not on one plane
 RANSAC_ITERATIONS = 96
+RANSAC_SCORE_CORNERS = 200       # hypotheses are ranked on at most this many corners (an even subset)
 RANSAC_THRESHOLD_PX = 0.6      # stereo transfer error; off-plane corners 1 cm from the plane at 2 m exceed it
 INLIER_SIGMAS = 5.0             # final inliers: corner error within this many robust sigmas ...
 INLIER_FLOOR_PX = 0.3           # ... or this many pixels, whichever is larger

@@ -65,10 +65,14 @@ def ransac_plane(points_left: NDArray[np.float64], normalized_left: NDArray[np.f
     hyp = np.linalg.solve(tri[good], np.ones((good.sum(), 3, 1)))[..., 0]
     if len(hyp) == 0:
         return np.full(3, np.nan), np.zeros(n, dtype=bool)
-    err = transfer_residuals_px(hyp, normalized_left, normalized_right, T_right_from_left, f_right)
+    # hypotheses are ranked on an even subset of the corners (a few hundred tell the best plane as well as all
+    # of them); the winner's inliers are counted on all
+    score = np.unique(np.linspace(0, n - 1, min(n, limits.RANSAC_SCORE_CORNERS)).astype(np.int64))
+    err = transfer_residuals_px(hyp, normalized_left[score], normalized_right[score], T_right_from_left, f_right)
     counts = (err < threshold_px).sum(axis=1)
     best = int(np.argmax(counts))
-    inliers = err[best] < threshold_px
+    inliers = transfer_residuals_px(hyp[best], normalized_left, normalized_right, T_right_from_left,
+                                    f_right)[0] < threshold_px
     if inliers.sum() >= 3:
         refit = plane_from_points(points_left[inliers])
         if np.all(np.isfinite(refit)):
@@ -280,13 +284,16 @@ def fit_ml(model: MLModel, p0: NDArray[np.float64], inliers: NDArray[np.bool_],
     inliers are re-estimated twice."""
     theta = np.concatenate([p0, np.zeros(N_PARAMS - 3)]) if theta0 is None else theta0.copy()
     sigma = 0.25
+    converged = False
     for _ in range(2):
         for _ in range(iterations):
             r, J = _linearize(model, theta, sigma, inliers)
             delta = _solve(J, r)
             theta = theta + delta
-            if np.linalg.norm(delta[PLANE]) < 1e-7 * np.linalg.norm(theta[PLANE]):
+            converged = bool(np.linalg.norm(delta[PLANE]) < 1e-7 * np.linalg.norm(theta[PLANE]))
+            if converged:
                 break
+        linearized_at = (sigma, inliers)
         pix = model.pixel_residuals_batch(theta[None], inliers)[0]
         sigma = max(float(np.sqrt(pix @ pix / max(len(pix) - 3, 1))), limits.SIGMA_FLOOR_PX)
         # inliers from a robust noise level, so a cluster of off-plane corners cannot widen its own gate
@@ -294,9 +301,17 @@ def fit_ml(model: MLModel, p0: NDArray[np.float64], inliers: NDArray[np.bool_],
         gate = max(limits.INLIER_FLOOR_PX, limits.INLIER_SIGMAS * robust)
         if refine_inliers:
             inliers = model.seen_any & (model.corner_errors(theta) < gate)
-    r, J = _linearize(model, theta, sigma, inliers)
-    theta = theta + _solve(J, r)
-    r, J = _linearize(model, theta, sigma, inliers)
+    if converged and np.array_equal(inliers, linearized_at[1]):
+        # the last step was negligible and the corners are the same: the last linearization holds; only the
+        # pixel rows' whitening changes with the new noise level (the priors' rows stay)
+        pixel_rows = len(r) - (N_PARAMS - 3)
+        r, J = r.copy(), J.copy()
+        r[:pixel_rows] *= linearized_at[0] / sigma
+        J[:pixel_rows] *= linearized_at[0] / sigma
+    else:
+        r, J = _linearize(model, theta, sigma, inliers)
+        theta = theta + _solve(J, r)
+        r, J = _linearize(model, theta, sigma, inliers)
     covariance = np.linalg.pinv(J.T @ J)
     pix = model.pixel_residuals_batch(theta[None], inliers)[0]
     row_view = np.concatenate([np.full(2 * int((v.seen & inliers).sum()), i) for i, v in enumerate(model.views)]

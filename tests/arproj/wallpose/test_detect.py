@@ -1,5 +1,6 @@
 import numpy as np
 
+from arproj.wallpose import limits
 from arproj.wallpose.detect import detect
 from geometry.poses import invert, transform_points
 
@@ -17,8 +18,8 @@ def _true_pixels(case, camera, ids):
 def test_corners_found_at_their_true_pixels(case_2m_30, photos_2m_30) -> None:
     for camera, image in zip(("camera_left", "camera_right"), photos_2m_30, strict=True):
         det = detect(image, case_2m_30.pattern, case_2m_30.views.camera(camera), case_2m_30.views.projector,
-                     camera)
-        assert det.reason is None
+                     camera, max_corners=None)
+        assert det.reason is None and det.kept_fraction == 1.0
         assert det.count > 0.9 * case_2m_30.pattern.n_corners
         err = det.pixels - _true_pixels(case_2m_30, camera, det.corner_ids)
         assert np.sqrt(np.mean(err ** 2)) < 0.15          # subpixel: noise 2 grey levels, blur 0.7 px
@@ -30,3 +31,23 @@ def test_blank_image_gives_a_reason_not_corners(case_2m_30) -> None:
     blank = np.full((800, 1280), 30, np.uint8)
     det = detect(blank, case_2m_30.pattern, case_2m_30.views.camera_left, case_2m_30.views.projector, "camera_left")
     assert det.count == 0 and "low contrast" in det.reason
+
+
+def test_corner_cap_keeps_an_even_subset_at_the_same_pixels(case_2m_30, photos_2m_30) -> None:
+    pattern, views = case_2m_30.pattern, case_2m_30.views
+    assert pattern.n_corners > limits.MAX_CORNERS  # the cap applies to this case
+    full = detect(photos_2m_30[0], pattern, views.camera_left, views.projector, "camera_left", max_corners=None)
+    capped = detect(photos_2m_30[0], pattern, views.camera_left, views.projector, "camera_left")
+    assert 0.9 * limits.MAX_CORNERS < capped.count <= 1.05 * limits.MAX_CORNERS
+    assert capped.kept_fraction < 1.0 and set(capped.corner_ids) <= set(full.corner_ids)
+    # the same corners land on the same pixels
+    same = np.searchsorted(full.corner_ids, capped.corner_ids)
+    assert np.abs(full.pixels[same] - capped.pixels).max() < 0.1
+    # spread evenly: every quarter of the board keeps about the kept fraction of its corners
+    grid_all, grid_kept = pattern.corner_grid[full.corner_ids], pattern.corner_grid[capped.corner_ids]
+    mid = np.median(grid_all, axis=0)
+    for qx in (False, True):
+        for qy in (False, True):
+            n_all = np.sum(((grid_all[:, 0] > mid[0]) == qx) & ((grid_all[:, 1] > mid[1]) == qy))
+            n_kept = np.sum(((grid_kept[:, 0] > mid[0]) == qx) & ((grid_kept[:, 1] > mid[1]) == qy))
+            assert abs(n_kept / n_all - capped.kept_fraction) < 0.1
