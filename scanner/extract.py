@@ -52,12 +52,7 @@ def pass_peaks(samples: dict[str, np.ndarray], cfg: ExtractConfig, peaks: PeakCo
         for channel in ("inductive", "ac"):
             lag = cfg.hysteresis_m * direction if channel == "inductive" else 0.0
             found += [p.position - lag for p in detect_peaks(coord, samples[channel][idx], peaks)]
-        found.sort()
-        merged: list[float] = []
-        for pos in found:
-            if merged and abs(pos - merged[-1]) < 0.015:
-                continue
-            merged.append(pos)
+        merged = _merge_close(found)
         order_c = np.argsort(coord)
         for pos in merged:
             x = np.interp(pos, coord[order_c], samples["x_m"][idx][order_c])
@@ -96,13 +91,7 @@ def column_peaks(samples: dict[str, np.ndarray], cfg: ExtractConfig, peaks: Peak
             for ch in ("inductive", "ac"):
                 found += [p.position for p in detect_peaks(v_levels, image[ch][:, j], column_cfg,
                                                            grid_step_m=0.002)]
-            found.sort()
-            merged: list[float] = []
-            for pos in found:
-                if merged and abs(pos - merged[-1]) < 0.015:
-                    continue
-                merged.append(pos)
-            for pos in merged:
+            for pos in _merge_close(found):
                 out.append((np.interp(pos, v_levels, image["x_m"][:, j]), np.interp(pos, v_levels, image["y_m"][:, j]),
                             1, -1 - int(fid) * 10000 - j))
     return np.array(out, dtype=np.float64).reshape(-1, 4)
@@ -251,3 +240,15 @@ def evaluate(wall: Wall, segments: list[np.ndarray], tolerance_m: float = 0.015,
     return Evaluation(recall=found / max(1, len(targets)), length_recall=covered_len / max(total_len, 1e-9),
                       mean_error_m=float(all_err.mean()) if all_err.size else float("nan"),
                       false_length_m=false_len, per_object=per_object)
+
+
+PEAK_MERGE_M = 0.015  # inductive and AC peaks closer than this along a pass are one object
+
+
+def _merge_close(positions: list[float]) -> list[float]:
+    """Sorted positions with each run of near-duplicates (within PEAK_MERGE_M) kept once, at its first."""
+    merged: list[float] = []
+    for pos in sorted(positions):
+        if not merged or abs(pos - merged[-1]) >= PEAK_MERGE_M:
+            merged.append(pos)
+    return merged
