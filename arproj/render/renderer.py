@@ -8,6 +8,9 @@ The mesh's coordinates are the "world" of the pose (for the projection session: 
 is unlit: a projector emits the texture's colours as they are. Where the intrinsics have distortion, a second
 pass warps an (enlarged) pinhole render exactly as cv2.projectPoints distorts points. Every GPU object is
 owned by the renderer and released by release() / on leaving the `with` block.
+
+Meshes are reordered at upload for the vertex cache (vertex_order.py): the same triangles, drawn with
+about half the vertex work on llvmpipe; and chunks of triangles outside the view are not drawn (culling.py).
 """
 
 from __future__ import annotations
@@ -22,8 +25,10 @@ from numpy.typing import ArrayLike, NDArray
 
 import shaders
 from arproj.gl import create_context
+from arproj.render.culling import ChunkBounds
 from arproj.render.distortion import distortion_map
 from arproj.render.projection import linear_depth, projection_matrix, view_matrix
+from arproj.render.vertex_order import cache_friendly
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, transform_points
@@ -52,6 +57,7 @@ class _DrawItem:
     ibo: moderngl.Buffer
     vao: moderngl.VertexArray
     texture: moderngl.Texture | None
+    chunks: ChunkBounds
 
 
 @dataclass
@@ -102,10 +108,11 @@ class MeshRenderer:
         self._bounds = np.array([b.min(axis=0), b.max(axis=0)])
 
     def _upload(self, mesh: trimesh.Trimesh) -> _DrawItem:
-        positions = np.asarray(mesh.vertices, dtype=np.float32)
-        faces = np.asarray(mesh.faces, dtype=np.uint32)
+        vertex_order, faces = cache_friendly(mesh.vertices, mesh.faces)
+        positions = np.asarray(mesh.vertices, dtype=np.float32)[vertex_order]
         image, uv = _texture_of(mesh)
         if image is not None:
+            uv = uv[vertex_order]
             # trimesh's UV v runs up the image; GL textures here are stored top row first.
             uv = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]]).astype(np.float32)
             vertices = np.hstack([positions, uv])
@@ -115,7 +122,7 @@ class MeshRenderer:
             texture.filter = _TEXTURE_FILTER
             texture.repeat_x = texture.repeat_y = False
         else:
-            colors = _vertex_colors(mesh)
+            colors = _vertex_colors(mesh)[vertex_order]
             vertices = np.hstack([positions, colors])
             layout = ("3f 4f", "in_position", "in_color")
             texture = None
@@ -123,7 +130,7 @@ class MeshRenderer:
         vbo = self.ctx.buffer(np.ascontiguousarray(vertices, dtype=np.float32))
         ibo = self.ctx.buffer(np.ascontiguousarray(faces))
         vao = self.ctx.vertex_array(program, [(vbo, *layout)], index_buffer=ibo, index_element_size=4)
-        return _DrawItem(vbo, ibo, vao, texture)
+        return _DrawItem(vbo, ibo, vao, texture, ChunkBounds.of(positions, faces))
 
     # -- drawing ---------------------------------------------------------------------------------------
     def render(self, intr: Intrinsics, T_world_from_camera: ArrayLike, depth: bool = False,
@@ -181,7 +188,8 @@ class MeshRenderer:
             if item.texture is not None:
                 item.texture.use(0)
                 program["u_texture"] = 0
-            item.vao.render(moderngl.TRIANGLES)
+            for first, count in item.chunks.visible_ranges(clip):
+                item.vao.render(moderngl.TRIANGLES, vertices=3 * count, first=3 * first)
         return target
 
     def _read_color(self, fbo: moderngl.Framebuffer, intr: Intrinsics, components: int) -> NDArray[np.uint8]:
