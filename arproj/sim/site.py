@@ -17,6 +17,7 @@ import hashlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
+from itertools import pairwise
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -169,10 +170,14 @@ class _View:
     seen: NDArray[np.bool_]
     sigma_range: tuple[float, float] | None
     blur: optics.BlurPlan              # the camera's defocus at this view's depths
+    _level_weights: dict[tuple[float, ...], list[NDArray[np.float32] | None]] = field(default_factory=dict)
 
     @cached_property
     def albedo_mono(self) -> NDArray[np.float32]:
-        return self.albedo_rgb @ optics.LUMA_RGB
+        # The (h, w, 4) array albedo_rgb is a view of (with depth last) needs no copy.
+        base = self.albedo_rgb.base
+        whole = base if isinstance(base, np.ndarray) and base.shape == (*self.albedo_rgb.shape[:2], 4) else None
+        return optics.luma(whole if whole is not None and whole.flags.c_contiguous else self.albedo_rgb)
 
     @cached_property
     def ambient_rgb(self) -> NDArray[np.float32]:
@@ -189,6 +194,30 @@ class _View:
     @cached_property
     def gain_mono(self) -> NDArray[np.float32]:
         return self.albedo_mono * self.irradiance * np.float32(1.0 / np.pi)
+
+    def level_weights(self, sigma_levels: tuple[float, ...]) -> list[NDArray[np.float32] | None]:
+        """Per pixel, how much of each blur level's light it takes (None: that level is not used), for the
+        levels a pattern was blurred to (the same for every pattern at this view: cached)."""
+        cached = self._level_weights.get(sigma_levels)
+        if cached is None:
+            sig = np.asarray(sigma_levels, dtype=np.float32)
+            # Fractional level index, linear between levels and clamped at both ends (np.interp's result as
+            # a sum of one clamped ramp per gap: a few in-place passes instead of a binary search per pixel).
+            position = np.zeros_like(self.sigma_px)
+            ramp = np.empty_like(self.sigma_px)
+            for lo, hi in pairwise(sig):
+                np.subtract(self.sigma_px, lo, out=ramp)
+                ramp *= np.float32(1.0) / (hi - lo)
+                np.clip(ramp, 0.0, 1.0, out=ramp)
+                position += ramp
+            cached = []
+            for k in range(len(sig)):
+                weight = np.abs(position - np.float32(k))
+                np.subtract(np.float32(1.0), weight, out=weight)
+                np.clip(weight, 0.0, 1.0, out=weight)
+                cached.append(weight if weight.any() else None)
+            self._level_weights[sigma_levels] = cached
+        return cached
 
 
 def _lookup(image: NDArray[np.float32], map_u: NDArray[np.float32], map_v: NDArray[np.float32]
@@ -576,31 +605,40 @@ class Site:
         state = self._projector_state(projector_image, view.sigma_range or (0.0, 0.0))
         indirect = self._indirect_lux(state)
         bounce = (np.asarray(indirect, dtype=np.float32) / np.float32(np.pi)).reshape(-1)   # (1,) or (3,)
-        ambient_rgb = view.ambient_rgb + view.albedo_rgb * bounce
+        # Ambient and interreflected light share the albedo: one product, and only in the form needed.
+        ambient_scale = np.float32(view.ambient_lux / np.pi) + bounce
+
+        def ambient_rgb() -> NDArray[np.float32]:
+            return view.albedo_rgb * ambient_scale
+
         if view.sigma_range is None:      # the projector lights nothing this camera sees
-            return ambient_rgb if color else (ambient_rgb @ optics.LUMA_RGB if bounce.size == 3
-                                              else view.ambient_mono + view.albedo_mono * bounce[0])
+            if color:
+                return ambient_rgb()
+            return optics.luma(ambient_rgb()) if bounce.size == 3 else view.albedo_mono * ambient_scale[0]
         light = state.levels
         assert light is not None
-        sigma_levels = np.asarray(state.blur_levels_px, dtype=np.float32)
-        if len(sigma_levels) == 1:
+        if len(state.blur_levels_px) == 1:
             sampled = _lookup(light[0], view.map_u, view.map_v)
         else:
-            position = np.interp(view.sigma_px, sigma_levels, np.arange(len(sigma_levels))).astype(np.float32)
             sampled = None
-            for k in range(len(sigma_levels)):
-                weight = np.clip(1.0 - np.abs(position - k), 0.0, 1.0)
-                if not weight.any():
+            for k, weight in enumerate(view.level_weights(tuple(state.blur_levels_px))):
+                if weight is None:
                     continue
                 part = _lookup(light[k], view.map_u, view.map_v)
                 part *= weight if part.ndim == 2 else weight[..., None]
-                sampled = part if sampled is None else sampled + part
-        if sampled.ndim == 2:          # grey projector image
-            if color:
-                return ambient_rgb + view.gain_rgb * sampled[..., None]
-            return view.ambient_mono + view.albedo_mono * bounce[0] + view.gain_mono * sampled
-        rgb = ambient_rgb + view.gain_rgb * sampled
-        return rgb if color else np.ascontiguousarray(rgb @ optics.LUMA_RGB)
+                if sampled is None:
+                    sampled = part
+                else:
+                    sampled += part
+        assert sampled is not None
+        # In place on the fresh arrays: a 1280x800 photo is a few MB per temporary.
+        if sampled.ndim == 2 and not color:     # grey image, mono camera (its bounce is grey too)
+            sampled *= view.gain_mono
+            sampled += view.albedo_mono * ambient_scale[0]
+            return sampled
+        rgb = view.gain_rgb * (sampled[..., None] if sampled.ndim == 2 else sampled)
+        rgb += ambient_rgb()
+        return rgb if color else optics.luma(rgb)
 
     def _indirect_lux(self, state: ProjectorState) -> NDArray[np.float64]:
         """Projector light reflected by the room onto every surface (split-flux estimate, uniform), (1,) for a
