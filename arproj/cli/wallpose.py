@@ -1,6 +1,7 @@
 """`arproj wallpose`: measure the wall's pose once from the projected pattern and print (and draw) it.
 
     arproj wallpose --sim --distance 2 --incidence 30            on the simulated site, compared with its truth
+    arproj wallpose --sim --distance 3 --incidence 20 --along 1.2   ... standing near a room corner (in view)
     arproj wallpose --pattern-out pattern.png --rig RIG --head 0,5,0 --distance 2   the image to project
     arproj wallpose --rig RIG --head 0,5,0 --distance 2 --left L.png --right R.png  from real photos
 """
@@ -15,6 +16,10 @@ import typer
 
 from arproj.console import console
 from geometry.errors import InputError
+
+# The simulated room lights every surface alike; in a real room the walls meeting at a corner differ in how they
+# are lit. The --sim site gives wall 0's neighbours another reflectance so that its corners show (wall 0 as is).
+SIM_SIDE_WALL_ALBEDO = 0.6
 
 
 def _head_angles(text: str) -> np.ndarray:
@@ -36,11 +41,16 @@ def _read_gray(path: Path, option: str) -> np.ndarray:
     return image
 
 
-def draw_result(image: np.ndarray, corners: np.ndarray, used: np.ndarray, lines: list[str], path: Path) -> Path:
-    """The camera image with the corners found (green: used, red: left out) and the figures written on it."""
+def draw_result(image: np.ndarray, corners: np.ndarray, used: np.ndarray, lines: list[str], path: Path,
+                edge_points: list[np.ndarray] | None = None) -> Path:
+    """The camera image with the corners found (green: used, red: left out), the wall edges' points used (blue)
+    and the figures written on it."""
     import cv2
 
     canvas = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image.copy()
+    for points in edge_points or []:
+        for x, y in points:
+            cv2.circle(canvas, (round(x), round(y)), 2, (255, 120, 0), -1, cv2.LINE_AA)
     for (x, y), ok in zip(corners, used, strict=True):
         cv2.circle(canvas, (round(x), round(y)), 3, (0, 200, 0) if ok else (0, 0, 255), 1, cv2.LINE_AA)
     for k, text in enumerate(lines):
@@ -52,8 +62,10 @@ def draw_result(image: np.ndarray, corners: np.ndarray, used: np.ndarray, lines:
 
 
 def run_wallpose(sim: bool, distance: float, incidence: float, seed: int, rig: Path | None, head: str | None,
-                 left: Path | None, right: Path | None, pattern_out: Path | None, picture: Path) -> dict:
-    """Everything `arproj wallpose` does; returns the figures it prints."""
+                 left: Path | None, right: Path | None, pattern_out: Path | None, picture: Path,
+                 along: float | None = None) -> dict:
+    """Everything `arproj wallpose` does; returns the figures it prints. along: with sim, where along wall 0
+    the robot aims (m from its left end; None: the middle)."""
     from arproj.wallpose.detect import detect
     from arproj.wallpose.estimate import estimate_from_detections
     from arproj.wallpose.pattern import choose_pattern
@@ -66,8 +78,9 @@ def run_wallpose(sim: bool, distance: float, incidence: float, seed: int, rig: P
         from arproj.sim import Site
         from arproj.wallpose.simtrial import LARGE_ROOM, calibrated_views, photograph_pair
 
-        site = Site.build(seed=seed, room=LARGE_ROOM)
-        site.place_robot(distance, incidence, aim_height_m=1.1)
+        room = {**LARGE_ROOM, "walls": {1: {"albedo": SIM_SIDE_WALL_ALBEDO}, 3: {"albedo": SIM_SIDE_WALL_ALBEDO}}}
+        site = Site.build(seed=seed, room=room)
+        site.place_robot(distance, incidence, along_m=along, aim_height_m=1.1)
         views = calibrated_views(site)
     else:
         from geometry.rig import Rig
@@ -106,7 +119,9 @@ def run_wallpose(sim: bool, distance: float, incidence: float, seed: int, rig: P
         lines = [f"normal ±{est.normal_95_deg:.3f} deg, distance {est.distance:.4f} m "
                  f"±{1000 * est.centre_distance_95_m:.2f} mm (95%)",
                  f"{est.corners} corners, noise {est.sigma_px:.3f} px"]
+        edge_points: list[np.ndarray] = []
         if site is not None:
+            from arproj.wallpose.edges import camera_images
             from arproj.wallpose.pose import RoomMap, estimate_wall_pose
             from arproj.wallpose.simtrial import true_landing, wall_truth
             from geometry.poses import invert, rotation_angle_deg
@@ -117,7 +132,8 @@ def run_wallpose(sim: bool, distance: float, incidence: float, seed: int, rig: P
                                "distance_error_mm": round(1000 * abs(est.offset_at(centre)), 4)}
             T_robot_from_projector = views.T_robot_from_camera_left @ est.T_camera_left_from_projector
             pose = estimate_wall_pose(est, 0, RoomMap.from_site(site), site.localized_T_room_from_robot,
-                                      T_robot_from_projector, site.laser_scan().points_robot())
+                                      T_robot_from_projector, site.laser_scan().points_robot(),
+                                      camera_images=camera_images(views, image_l, image_r), projector=views.projector)
             T_true = invert(site.walls[0].T_room_from_wall) @ site.T_room_from_robot
             result["pose"] = {
                 "T_wall_from_robot": pose.T_wall_from_robot.round(6).tolist(),
@@ -126,11 +142,16 @@ def run_wallpose(sim: bool, distance: float, incidence: float, seed: int, rig: P
                 "error_mm_along_height_distance":
                     (1000 * (pose.T_wall_from_robot[:3, 3] - T_true[:3, 3])).round(3).tolist(),
                 "rotation_error_deg": round(rotation_angle_deg(pose.T_wall_from_robot, T_true), 4),
-                "sources": pose.sources}
+                "sources": pose.sources,
+                "edges": [{"edge": o.edge, "camera": o.camera, "points": len(o.pixels),
+                           "noise_px": round(o.sigma_px, 3), "contrast_grey": round(o.contrast, 1)}
+                          for o in pose.edges],
+                "edges_rejected": pose.edges_rejected}
+            edge_points = [o.pixels for o in pose.edges if o.camera == "camera_left"]
             lines.append(f"truth: normal off by {result['truth']['normal_error_deg']:.4f} deg, "
                          f"{result['truth']['distance_error_mm']:.3f} mm at the centre")
         used = np.isin(det_l.corner_ids, est.inlier_ids)
-        result["picture"] = str(draw_result(image_l, det_l.pixels, used, lines, picture))
+        result["picture"] = str(draw_result(image_l, det_l.pixels, used, lines, picture, edge_points))
     finally:
         if site is not None:
             site.release()
@@ -145,6 +166,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                        "pattern; with --sim: where the robot stands)."),
         incidence: float = typer.Option(0.0, "--incidence", help="Approximate incidence angle on the wall, °."),
         seed: int = typer.Option(0, "--seed", help="Seed of the simulated site."),
+        along: float | None = typer.Option(None, "--along", help="With --sim: aim point along wall 0, m from its "
+                                           "left end (default: the middle); near an end a room corner is in view."),
         rig: Path | None = typer.Option(None, "--rig", help="Calibrated rig folder (rig.yaml)."),
         head: str | None = typer.Option(None, "--head", help="The head's current pan,tilt,roll in degrees."),
         left: Path | None = typer.Option(None, "--left", help="Left camera photo of the projected pattern."),
@@ -154,7 +177,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
     ) -> None:
         """Measure the wall's pose once from the projected checker pattern seen by both cameras."""
-        result = run_wallpose(sim, distance, incidence, seed, rig, head, left, right, pattern_out, picture)
+        result = run_wallpose(sim, distance, incidence, seed, rig, head, left, right, pattern_out, picture, along)
         if as_json:
             print(json.dumps(result, indent=2))
             return

@@ -27,6 +27,7 @@ from arproj.session import tolerances as tol
 from arproj.session.projection import MapProjector
 from arproj.session.robot_io import RobotIO
 from arproj.session.wallmap import WallMap
+from arproj.wallpose.edges import camera_images
 from arproj.wallpose.estimate import PlaneEstimate, Uncertainty, estimate_plane
 from arproj.wallpose.pattern import choose_pattern
 from arproj.wallpose.pose import estimate_wall_pose
@@ -180,11 +181,13 @@ class ProjectionSession:
         trans = max(Uncertainty().projector_translation_m, 3e-3 * _quality(self.rig, "head", "position_rms_mm"))
         return Uncertainty(projector_rotation_deg=rot, projector_translation_m=trans)
 
-    def pose_from_plane(self, plane: PlaneEstimate, views: ViewRig, scan: NDArray[np.float64] | None
+    def pose_from_plane(self, plane: PlaneEstimate, views: ViewRig, scan: NDArray[np.float64] | None,
+                        images: tuple[NDArray, NDArray] | None = None
                         ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float, str | None]:
         """The full wall pose from a measured plane: (T_wall_from_robot, T_robot_from_projector, in-plane σ m,
         roll σ rad, source or None). With the robot's localization, floor and laser (full_pose_inputs) the
-        wall-pose package fuses them; otherwise the plane is snapped onto the robot's prior. Raises InputError
+        wall-pose package fuses them (and the wall's edges in images = (left, right) photos, where in view);
+        otherwise the plane is snapped onto the robot's prior. Raises InputError
         (not enough evidence) when the fusion declines."""
         T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
         prior, in_plane_sigma, _ = self.robot.wall_prior()
@@ -193,7 +196,9 @@ class ProjectionSession:
             return (registration.snap_to_plane(prior, plane.normal, plane.distance), T_robot_from_projector,
                     in_plane_sigma, 0.0, None)
         room, wall_index, localized, loc_m, loc_deg = full
-        pose = estimate_wall_pose(plane, wall_index, room, localized, T_robot_from_projector, scan, loc_m, loc_deg)
+        pose = estimate_wall_pose(plane, wall_index, room, localized, T_robot_from_projector, scan, loc_m, loc_deg,
+                                  camera_images=None if images is None else camera_images(views, *images),
+                                  projector=views.projector)
         in_plane = float(np.hypot(pose.sigma_along_m, pose.sigma_height_m))
         return (pose.T_wall_from_robot, T_robot_from_projector, in_plane, float(np.radians(pose.sigma_roll_deg)),
                 "wall pose (" + ", ".join(pose.sources) + ")")
@@ -232,7 +237,7 @@ class ProjectionSession:
         scan = self.robot.laser_points()
         try:
             T_wall_from_robot, T_robot_from_projector, in_plane_sigma, roll_sigma_rad, fused = \
-                self.pose_from_plane(plane, views, scan)
+                self.pose_from_plane(plane, views, scan, (left, right))
         except InputError as err:
             self.pose_failure = err.message.replace("not enough evidence for the wall pose: ", "")
             self.log.append(f"wall pose: {self.pose_failure}")

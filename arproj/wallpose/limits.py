@@ -11,7 +11,7 @@ MARKER_SPACING_SQUARES = 6      # roughly one coded marker block every this many
 
 # --- detection -------------------------------------------------------------------------------------------------
 MARKER_DETECT_MAX_PX = 800      # the marker detector runs on an image downscaled to at most this width
-MAX_CORNERS = 450               # more visible corners than this: an even subset is refined and fitted
+MAX_CORNERS = 650               # more visible corners than this: an even subset is refined and fitted
 SUBPIX_ITERATIONS = 30
 SUBPIX_EPS_PX = 0.002
 MAX_CORNER_SHIFT_PX = 2.5       # refined corner farther than this from its prediction: rejected
@@ -58,3 +58,32 @@ FLOOR_HEIGHT_SIGMA_M = 0.002    # the robot stands on the floor: its height is k
 FLOOR_TILT_SIGMA_DEG = 0.1      # and its roll and pitch
 LASER_GATE_M = 0.08             # scan points farther than this from every wall are not used
 LASER_RANGE_SIGMA_M = 0.01
+
+# --- the wall's edges seen by the cameras (room corners, floor and ceiling lines; edges.py) -------------------
+EDGE_SAMPLES_3D = 800           # points along a 3-D edge when predicting its image
+EDGE_IMAGE_MARGIN_PX = 8.0      # a search profile must stay this far inside the image
+EDGE_PROFILE_SPACING_PX = 4.0   # search profiles this far apart along the predicted line
+EDGE_PROFILE_HALF_WIDTH_PX = 2  # each profile averages 2·this+1 parallel rows (sensor noise, texture)
+EDGE_WINDOW_SIGMAS = 5.0        # search ± this many σ of the predicted line's position ...
+EDGE_WINDOW_EXTRA_PX = 4.0      # ... plus this (blur, the step's own width)
+EDGE_WINDOW_MAX_PX = 80.0       # a wider search than this would meet too much else: no search
+EDGE_MIN_CONTRAST = 6.0         # grey levels between the two surfaces meeting at the edge
+EDGE_CANDIDATES_PER_PROFILE = 3 # strongest steps kept per profile (the pattern's edges cross it too)
+EDGE_RANSAC_ITERATIONS = 200
+EDGE_RANSAC_THRESHOLD_PX = 1.0
+EDGE_INLIER_SIGMAS = 3.0        # final inliers: within this many robust sigmas of the fitted line ...
+EDGE_INLIER_FLOOR_PX = 0.3      # ... or this many pixels, whichever is larger
+EDGE_MIN_POINTS = 20            # fewer edge points on one line than this: no observation
+EDGE_MIN_INLIER_FRACTION = 0.25 # of the profiles searched (the pattern may light much of the rest)
+EDGE_MIN_LENGTH_PX = 80.0       # the fitted stretch of the line must be at least this long
+EDGE_MAX_SIGMA_PX = 0.8         # edge points scatter more than this: not a clean edge
+EDGE_MAX_ANGLE_DEG = 3.0        # fitted line's direction this far from the predicted one: not that edge
+EDGE_SIGMA_FLOOR_PX = 0.1       # edge point noise is never taken as smaller than this
+EDGE_SYSTEMATIC_PX = 0.12       # a shift common to a whole line (light and texture near it, calibration)
+EDGE_CHI2_2_999 = 13.82         # 99.9 % quantile, 2 degrees of freedom: an edge this far off is rejected
+EDGE_CAMERA_GAMMA = 2.2         # the cameras' encoding (grey = 255·light^(1/γ)): steps are located in linear light
+EDGE_END_CLEARANCE_PX = 4.0     # profiles keep this much more than their own reach from the edge's ends
+EDGE_CONTRAST_RATIO = 1.25      # edge points whose step is this many times taller (or lower) than the line's
+                                # median are left out (the pattern lights that stretch)
+EDGE_LIT_MARGIN_FRACTION = 0.03 # stretches of an edge within the projector's image, grown by this fraction of
+                                # its width, are not searched (the pattern's own steps and spill are there)

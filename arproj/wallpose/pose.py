@@ -1,6 +1,7 @@
 """The full wall pose: the plane from the cameras fixes 3 degrees of freedom (the normal's direction and the
 distance); the robot's localization, the floor it stands on and the 2-D laser scan of the room's walls (the
-side walls and room corner fix the position along the wall) fix the rest.
+side walls and room corner fix the position along the wall) fix the rest; where the wall's own edges (room
+corners, floor and ceiling lines) are in the cameras' view, their image lines do too (arproj.wallpose.edges).
 
 All are Gaussian measurements of one unknown, the robot's pose in the room, T_room_from_robot = T0 · exp(δ)
 with δ = (rotation vector, translation) in the robot frame around the localized pose T0; a few Gauss–Newton
@@ -10,17 +11,20 @@ and covariance describe it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from arproj.wallpose import limits
+from arproj.wallpose.edges import CameraImage, EdgeObservation, Projector, find_wall_edges, project_undistorted
 from arproj.wallpose.estimate import PlaneEstimate
 from arproj.wallpose.evidence import NotEnoughEvidenceError
 from arproj.wallpose.plane import rotations
 from geometry.errors import InputError
-from geometry.poses import invert, make_pose
+from geometry.intrinsics import Intrinsics
+from geometry.poses import invert, make_pose, transform_points
 
 POSE_ITERATIONS = 6
 LASER_GATES_M = (0.4, 0.15, limits.LASER_GATE_M)  # association gates, coarse to fine (localization can be off)
@@ -34,7 +38,8 @@ class WallPose:
 
     sigma_along_m / sigma_height_m / sigma_distance_m / sigma_normal_deg / sigma_roll_deg: 1-σ of the robot's
     position along the wall, height, distance from it, its heading relative to the normal and rotation about
-    the normal, from the covariance; sources: which measurements were used."""
+    the normal, from the covariance; sources: which measurements were used; edges: the wall edges seen by the
+    cameras that were fused, edges_rejected: those found but not where the other measurements put them."""
 
     T_wall_from_robot: NDArray[np.float64]
     covariance: NDArray[np.float64]
@@ -47,6 +52,8 @@ class WallPose:
     sigma_normal_deg: float
     sigma_roll_deg: float
     sources: list[str] = field(default_factory=list)
+    edges: list[EdgeObservation] = field(default_factory=list)
+    edges_rejected: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -81,12 +88,18 @@ def _plane_whitener(plane: PlaneEstimate) -> tuple[NDArray[np.float64], NDArray[
 def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized_T_room_from_robot: NDArray,
                        T_robot_from_projector: NDArray, laser_points_robot: NDArray | None = None,
                        localization_sigma_m: float = 0.03, localization_sigma_deg: float = 1.0,
-                       projector_covariance: NDArray | None = None) -> WallPose:
+                       projector_covariance: NDArray | None = None, *,
+                       camera_images: Sequence[CameraImage] | None = None,
+                       projector: Intrinsics | None = None) -> WallPose:
     """Fuse the measured plane of wall `wall` with localization, floor and (optionally) a laser scan.
 
     laser_points_robot: (n, 3) scan returns in the robot frame; T_robot_from_projector: the projector's pose
     (e.g. T_robot_from_camera_left · plane.T_camera_left_from_projector, the measured one);
-    projector_covariance: (6, 6) of the projector pose relative to the robot, added to the result's.
+    projector_covariance: (6, 6) of the projector pose relative to the robot, added to the result's;
+    camera_images: the photos (arproj.wallpose.edges.camera_images) in which to look for the wall's edges
+    (room corners, floor and ceiling lines) around where the other measurements put them; each edge found and
+    consistent with them adds its image line as a measurement; projector: its intrinsics, when it was on for the
+    photos (the stretches of an edge it lights are not searched).
     Raises NotEnoughEvidenceError when the plane contradicts the map (the pattern is on another wall).
     """
     if not 0 <= wall < len(room.T_room_from_walls):
@@ -101,6 +114,8 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
         else np.asarray(laser_points_robot, dtype=np.float64)
     if laser is not None:
         sources.append(f"laser scan ({len(laser)} returns)")
+
+    edge_block: list[tuple[EdgeObservation, NDArray[np.float64], Intrinsics, NDArray[np.float64]]] = []
 
     def residuals(delta: NDArray[np.float64], gate: float) -> NDArray[np.float64]:
         T = T0 @ _exp(delta)
@@ -123,26 +138,58 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
                 best = np.where(np.abs(dist) < np.abs(best), dist, best)
             use = np.abs(best) < gate
             out.append(np.where(use, best, 0.0) / limits.LASER_RANGE_SIGMA_M)
+        for obs, T_robot_from_camera, intr, whitener in edge_block:
+            out.append(whitener @ _edge_offsets(obs, T @ T_robot_from_camera, intr))
         return np.concatenate([np.ravel(o) for o in out])
+
+    def solve(delta: NDArray[np.float64], gates: Sequence[float]) -> tuple[NDArray[np.float64], NDArray]:
+        J = np.zeros((0, 6))
+        for gate in gates:
+            for _ in range(POSE_ITERATIONS):
+                r = residuals(delta, gate)
+                J = np.empty((len(r), 6))
+                for k in range(6):
+                    h = np.zeros(6)
+                    h[k] = 1e-7
+                    J[:, k] = (residuals(delta + h, gate) - r) / 1e-7
+                step = np.linalg.solve(J.T @ J, -(J.T @ r))
+                delta = delta + step
+                if np.linalg.norm(step) < 1e-10:
+                    break
+        return delta, J
 
     _check_innovation(whiten, basis, measured, T0, T_wall_from_room, wall, localization_sigma_m,
                       localization_sigma_deg)
-    delta = np.zeros(6)
     gates = LASER_GATES_M if laser is not None else (np.inf,)
-    J = np.zeros((0, 6))
-    for gate in gates:
-        for _ in range(POSE_ITERATIONS):
-            r = residuals(delta, gate)
-            J = np.empty((len(r), 6))
-            for k in range(6):
-                h = np.zeros(6)
-                h[k] = 1e-7
-                J[:, k] = (residuals(delta + h, gate) - r) / 1e-7
-            step = np.linalg.solve(J.T @ J, -(J.T @ r))
-            delta = delta + step
-            if np.linalg.norm(step) < 1e-10:
-                break
+    delta, J = solve(np.zeros(6), gates)
     covariance = np.linalg.inv(J.T @ J)
+    rejected: list[str] = []
+    if camera_images:
+        cameras = {cam.name: cam for cam in camera_images}
+        lit = None if projector is None else Projector(projector, np.asarray(T_robot_from_projector, dtype=float))
+        found = find_wall_edges(list(camera_images), room.T_room_from_walls, room.sizes_m, wall, T0 @ _exp(delta),
+                                covariance, projector=lit)
+        for obs in found:
+            cam = cameras[obs.camera]
+            T_rc = np.asarray(cam.T_robot_from_camera, dtype=np.float64)
+            if _edge_innovation(obs, T0, delta, covariance, T_rc, cam.intrinsics) > limits.EDGE_CHI2_2_999:
+                rejected.append(f"{obs.edge} in {obs.camera}")
+                continue
+            edge_block.append((obs, T_rc, cam.intrinsics, np.linalg.inv(np.linalg.cholesky(obs.covariance))))
+        while edge_block:
+            delta_e, J_e = solve(delta, gates[-1:])
+            T_e = T0 @ _exp(delta_e)
+            # after fusing: an edge that still disagrees with everything else is dropped (and the rest refitted)
+            chi2 = [float(np.sum((W @ _edge_offsets(o, T_e @ T_rc, intr)) ** 2)) for o, T_rc, intr, W in edge_block]
+            worst = int(np.argmax(chi2))
+            if chi2[worst] <= limits.EDGE_CHI2_2_999:
+                delta, J = delta_e, J_e
+                covariance = np.linalg.inv(J.T @ J)
+                break
+            rejected.append(f"{edge_block[worst][0].edge} in {edge_block[worst][0].camera}")
+            del edge_block[worst]
+        if edge_block:
+            sources.append("camera edges (" + ", ".join(f"{o.edge} in {o.camera}" for o, *_ in edge_block) + ")")
     T_room_from_robot = T0 @ _exp(delta)
     T_wall_from_robot = T_wall_from_room @ T_room_from_robot
     T_robot_from_projector = np.asarray(T_robot_from_projector, dtype=np.float64)
@@ -162,7 +209,29 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
         sigma_along_m=float(np.sqrt(cov_t_wall[0, 0])), sigma_height_m=float(np.sqrt(cov_t_wall[1, 1])),
         sigma_distance_m=float(np.sqrt(cov_t_wall[2, 2])),
         sigma_normal_deg=float(np.degrees(np.sqrt(max(cov_r_wall[0, 0], cov_r_wall[1, 1])))),
-        sigma_roll_deg=float(np.degrees(np.sqrt(cov_r_wall[2, 2]))), sources=sources)
+        sigma_roll_deg=float(np.degrees(np.sqrt(cov_r_wall[2, 2]))), sources=sources,
+        edges=[o for o, *_ in edge_block], edges_rejected=rejected)
+
+
+def _edge_offsets(obs: EdgeObservation, T_room_from_camera: NDArray, intr: Intrinsics) -> NDArray[np.float64]:
+    """(2,) px: perpendicular distances of the seen stretch's two ends (3-D, from the map) from the image line
+    found, both in undistorted pixels (lens distortion is undone on the detected points instead)."""
+    uv = project_undistorted(intr, transform_points(invert(T_room_from_camera), obs.points_room))
+    return uv @ obs.line[:2] + obs.line[2]
+
+
+def _edge_innovation(obs: EdgeObservation, T0: NDArray, delta: NDArray, covariance: NDArray,
+                     T_robot_from_camera: NDArray, intr: Intrinsics) -> float:
+    """Mahalanobis² of an edge line against where the pose (δ, covariance) without it predicts it."""
+    T = T0 @ _exp(delta)
+    z = _edge_offsets(obs, T @ T_robot_from_camera, intr)
+    G = np.empty((2, 6))
+    for k in range(6):
+        h = np.zeros(6)
+        h[k] = 1e-7
+        G[:, k] = (_edge_offsets(obs, T0 @ _exp(delta + h) @ T_robot_from_camera, intr) - z) / 1e-7
+    S = obs.covariance + G @ covariance @ G.T
+    return float(z @ np.linalg.solve(S, z))
 
 
 def _predicted_plane(T_room_from_robot: NDArray, T_wall_from_room: NDArray) -> NDArray[np.float64]:
