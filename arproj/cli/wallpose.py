@@ -54,8 +54,13 @@ def draw_result(image: np.ndarray, corners: np.ndarray, used: np.ndarray, lines:
     for (x, y), ok in zip(corners, used, strict=True):
         cv2.circle(canvas, (round(x), round(y)), 3, (0, 200, 0) if ok else (0, 0, 255), 1, cv2.LINE_AA)
     for k, text in enumerate(lines):
-        cv2.putText(canvas, text, (12, 26 + 22 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 3, cv2.LINE_AA)
-        cv2.putText(canvas, text, (12, 26 + 22 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1, cv2.LINE_AA)
+        origin = (12, 26 + 22 * k)
+        # A dark outline from the same thin text shifted by a pixel: OpenCV 5 lays out thicker text wider, so
+        # a thick dark copy underneath would not line up.
+        for dx, dy in ((-1, -1), (-1, 1), (1, -1), (1, 1), (0, 2)):
+            cv2.putText(canvas, text, (origin[0] + dx, origin[1] + dy), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 1,
+                        cv2.LINE_AA)
+        cv2.putText(canvas, text, origin, cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1, cv2.LINE_AA)
     path.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(path), canvas)
     return path
