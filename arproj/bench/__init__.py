@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass, field
 from types import ModuleType
 from typing import Any
 
+from rich.measure import Measurement
 from rich.table import Table
 
 from arproj.console import console
@@ -37,15 +38,45 @@ class BenchTable:
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=2, default=_json_default)
 
-    def print(self) -> None:
+    def print(self, targets: bool = True) -> None:
+        """The table, its notes, then (targets=True) the headline figures: arproj, the peer, met or not."""
         table = Table(title=self.title, title_justify="left")
         for col in self.columns:
-            table.add_column(col, justify="left" if col == self.columns[0] else "right")
+            # Figures wrap rather than end in "…" when the terminal is narrow: a cut number is a wrong one.
+            table.add_column(col, justify="left" if col == self.columns[0] else "right", overflow="fold")
         for row in self.rows:
             table.add_row(*(_fmt(v) for v in row))
-        console.print(table)
+        # Not a terminal (a file, a CI log): as wide as the table needs.
+        saved_width = console.width
+        if not console.is_terminal:
+            console.width = max(saved_width, Measurement.get(console, console.options.update_width(10_000),
+                                                             table).maximum)
+        try:
+            console.print(table)
+        finally:
+            console.width = saved_width
         for note in self.notes:
             console.print(f"  {note}", highlight=False)
+        if targets and self.headline:
+            console.print(headline_table([(self.name, self.headline)], title="targets", with_benchmark=False))
+
+
+def headline_table(sections: list[tuple[str, dict[str, dict[str, Any]]]], title: str,
+                   with_benchmark: bool = True) -> Table:
+    """Headline figures of one or more benchmarks ((name, headline) each) as a table: figure, arproj, peer
+    (and what it is), target, met."""
+    table = Table(title=title, title_justify="left")
+    columns = ("benchmark", "figure", "arproj", "peer", "peer is", "target", "met")
+    for col in columns if with_benchmark else columns[1:]:
+        table.add_column(col, overflow="fold")
+    for name, headline in sections:
+        for label, h in headline.items():
+            met = h.get("met")
+            cells = [label, f"{h.get('arproj', '')}{h.get('unit', '')}", f"{h.get('peer', '–')}",
+                     str(h.get("peer_name", "")), str(h.get("target", "")),
+                     "–" if met is None else ("yes" if met else "NO")]
+            table.add_row(*([name, *cells] if with_benchmark else cells))
+    return table
 
 
 def _fmt(v: Any) -> str:

@@ -8,7 +8,7 @@ import sys
 
 import typer
 
-from arproj.bench import BenchTable, benchmark_modules
+from arproj.bench import BenchTable, benchmark_modules, headline_table
 from arproj.console import console, err_console
 
 
@@ -43,8 +43,6 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         seed: int = typer.Option(0, "--seed", help="Seed of the simulated inputs."),
     ) -> None:
         """Run every benchmark, each in its own process, and print one summary table of the headline figures."""
-        from rich.table import Table
-
         results: dict[str, BenchTable | str] = {}
         for name in modules:
             err_console.print(f"[bold]bench {name}[/] …")
@@ -52,23 +50,16 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             if isinstance(results[name], str):
                 err_console.print(f"[red]bench {name} failed:[/] {results[name]}")
             elif not as_json:
-                results[name].print()
+                results[name].print(targets=False)  # the summary below has them all
         if as_json:
             print(json.dumps({n: (json.loads(t.to_json()) if isinstance(t, BenchTable) else {"failed": t})
                               for n, t in results.items()}, indent=2))
             return
-        summary = Table(title="arproj bench all — headline figures", title_justify="left")
-        for col in ("benchmark", "figure", "arproj", "peer", "peer is", "target", "met"):
-            summary.add_column(col)
+        summary = headline_table([(n, t.headline) for n, t in results.items() if isinstance(t, BenchTable)],
+                                 title="arproj bench all — headline figures")
         for name, table in results.items():
             if isinstance(table, str):
                 summary.add_row(name, "failed", "–", "–", "", "", "NO")
-                continue
-            for label, h in table.headline.items():
-                met = h.get("met")
-                summary.add_row(name, label, f"{h.get('arproj', '')}{h.get('unit', '')}",
-                                f"{h.get('peer', '–')}", str(h.get("peer_name", "")), str(h.get("target", "")),
-                                "–" if met is None else ("yes" if met else "NO"))
         console.print(summary)
         if any(isinstance(t, str) for t in results.values()):
             raise typer.Exit(1)
