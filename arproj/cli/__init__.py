@@ -22,7 +22,7 @@ app = typer.Typer(
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
-    rich_markup_mode="rich",
+    rich_markup_mode="markdown",
 )
 bench_app = typer.Typer(
     help="Speed and accuracy benchmarks. Each runs its peer (OpenCV, pyrender, the paper's method) on the "
