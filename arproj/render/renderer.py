@@ -10,7 +10,7 @@ pass warps an (enlarged) pinhole render exactly as cv2.projectPoints distorts po
 owned by the renderer and released by release() / on leaving the `with` block.
 
 Meshes are reordered at upload for the vertex cache (vertex_order.py): the same triangles, drawn with
-about half the vertex work on llvmpipe; and chunks of triangles outside the view are not drawn (culling.py).
+about 40 % less vertex work on llvmpipe; and chunks of triangles outside the view are not drawn (culling.py).
 """
 
 from __future__ import annotations
