@@ -11,7 +11,7 @@ and covariance describe it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -147,11 +147,7 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
         for gate in gates:
             for _ in range(POSE_ITERATIONS):
                 r = residuals(delta, gate)
-                J = np.empty((len(r), 6))
-                for k in range(6):
-                    h = np.zeros(6)
-                    h[k] = 1e-7
-                    J[:, k] = (residuals(delta + h, gate) - r) / 1e-7
+                J = _numeric_jacobian(lambda d, gate=gate: residuals(d, gate), delta, r)
                 step = np.linalg.solve(J.T @ J, -(J.T @ r))
                 delta = delta + step
                 if np.linalg.norm(step) < 1e-10:
@@ -213,6 +209,17 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
         edges=[o for o, *_ in edge_block], edges_rejected=rejected)
 
 
+def _numeric_jacobian(f: Callable[[NDArray[np.float64]], NDArray[np.float64]], delta: NDArray[np.float64],
+                      f0: NDArray[np.float64], step: float = 1e-7) -> NDArray[np.float64]:
+    """(len(f0), 6) forward differences of f around the pose increment delta (f0 = f(delta))."""
+    J = np.empty((len(f0), len(delta)))
+    for k in range(len(delta)):
+        h = np.zeros(len(delta))
+        h[k] = step
+        J[:, k] = (f(delta + h) - f0) / step
+    return J
+
+
 def _edge_offsets(obs: EdgeObservation, T_room_from_camera: NDArray, intr: Intrinsics) -> NDArray[np.float64]:
     """(2,) px: perpendicular distances of the seen stretch's two ends (3-D, from the map) from the image line
     found, both in undistorted pixels (lens distortion is undone on the detected points instead)."""
@@ -223,13 +230,11 @@ def _edge_offsets(obs: EdgeObservation, T_room_from_camera: NDArray, intr: Intri
 def _edge_innovation(obs: EdgeObservation, T0: NDArray, delta: NDArray, covariance: NDArray,
                      T_robot_from_camera: NDArray, intr: Intrinsics) -> float:
     """Mahalanobis² of an edge line against where the pose (δ, covariance) without it predicts it."""
-    T = T0 @ _exp(delta)
-    z = _edge_offsets(obs, T @ T_robot_from_camera, intr)
-    G = np.empty((2, 6))
-    for k in range(6):
-        h = np.zeros(6)
-        h[k] = 1e-7
-        G[:, k] = (_edge_offsets(obs, T0 @ _exp(delta + h) @ T_robot_from_camera, intr) - z) / 1e-7
+    def offsets(d: NDArray[np.float64]) -> NDArray[np.float64]:
+        return _edge_offsets(obs, T0 @ _exp(d) @ T_robot_from_camera, intr)
+
+    z = offsets(delta)
+    G = _numeric_jacobian(offsets, delta, z)
     S = obs.covariance + G @ covariance @ G.T
     return float(z @ np.linalg.solve(S, z))
 
