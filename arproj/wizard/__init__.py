@@ -129,14 +129,20 @@ def run_wizard(out: Path, sim: bool = False, restart: bool = False, seed: int = 
                 break
     finally:
         station.release()
+    following = _record_next_step(out, state)
+    if following is not None:
+        console.print(f"stopped before step {following}; run the same command again to resume", highlight=False)
+    return state
+
+
+def _record_next_step(out: Path, state: dict[str, Any]) -> str | None:
+    """The step to do next (None: all done), saved in the state; says so when calibration is complete."""
     following = next_step(state)
     state["next"] = following
     _save_state(out, state)
     if following is None:
         console.print(f"calibration complete → {out / RIG_FILE}", highlight=False)
-    else:
-        console.print(f"stopped before step {following}; run the same command again to resume", highlight=False)
-    return state
+    return following
 
 
 def _need(rig: Rig | None, out: Path) -> Rig:
@@ -178,12 +184,8 @@ def _guide(out: Path, state: dict[str, Any]) -> dict[str, Any]:
         if "projector" in rig.intrinsics:
             state["steps"]["projector"] = {"status": "done", "quality": rig.quality.get("projector", {})}
         _save_state(out, state)
-    step = next_step(state)
-    state["next"] = step
-    _save_state(out, state)
-    if step is None:
-        console.print(f"calibration complete → {out / RIG_FILE}", highlight=False)
-    else:
+    step = _record_next_step(out, state)
+    if step is not None:
         done = [s for s in STEPS if state["steps"].get(s, {}).get("status") == "done"]
         console.print(f"done: {', '.join(done) or 'nothing yet'}; next: [bold]{step}[/]", highlight=False)
         console.print(f"  {INSTRUCTIONS[step].replace('OUT', str(out))}", highlight=False)
