@@ -19,10 +19,10 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from scanner.grbl import DeviceResetError, GrblDrives
+from scanner.grbl import GrblDrives
 from scanner.plan import DriveConfig, PassSpec, move_position, move_time
 from scanner.sensor_model import SensorConfig
-from scanner.serial_link import DisconnectedError, LinkError, SerialLink
+from scanner.serial_link import DeviceResetError, DisconnectedError, LinkError, SerialLink
 from scanner.sim.devices import DeviceServer, FaultConfig, GrblSim, WallScannerSim
 from scanner.sim.world import FrameReport, SimWorld
 from scanner.wallscanner import WallScanner

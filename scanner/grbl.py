@@ -16,7 +16,7 @@ from __future__ import annotations
 import re
 
 from geometry.errors import InputError
-from scanner.serial_link import DisconnectedError, LinkError, LinkTimeoutError, SerialLink
+from scanner.serial_link import DeviceResetError, LinkError, RequestDamagedError, SerialLink
 
 POSITION_TOLERANCE_MM = 0.002
 STATUS_RE = re.compile(r"^<(\w+)(?::\d+)?\|MPos:(-?\d+\.\d+),(-?\d+\.\d+),(-?\d+\.\d+)(?:\|.*)?>$")
@@ -28,10 +28,6 @@ ERROR_CODES = {
 }
 ALARM_CODES = {1: "hard limit", 2: "soft limit: target exceeds machine travel", 3: "reset while in motion",
                8: "homing fail: pull-off", 9: "homing fail: limit switch not found"}
-
-
-class DeviceResetError(Exception):
-    """The device was reset or reconnected: state (position, buffers) was lost; redo the current step."""
 
 
 class GrblError(InputError):
@@ -49,53 +45,50 @@ class GrblDrives:
         self.retries = retries
         self.homed = False
         self._seen_reconnects = link.reconnects
-        self.faults_recovered = 0
+        self._protocol_faults = 0
 
     # ------------------------------------------------------------------ exchanges
+    @property
+    def faults_recovered(self) -> int:
+        """Faults got over so far: the link's (timeouts, resends, reconnects) and the protocol's own."""
+        return self.link.faults_recovered + self._protocol_faults
+
     def _exchange(self, command: str, timeout_s: float | None = None) -> str:
         """Send a command and wait for `ok` (returned as 'ok') or a status report for '?'.
 
-        Retries on timeouts and garbage; reconnects on disconnect and then raises DeviceResetError.
+        Retries on timeouts and garbled commands (the link's exchange); after a reconnect raises
+        DeviceResetError, since GRBL resets when its port reopens.
         """
-        with self.link.lock:
-            for attempt in range(self.retries + 1):
-                try:
-                    self.link.drain()
-                    self.link.write_line(command)
-                    while True:
-                        line = self.link.read_line(timeout_s).strip()
-                        if command == "?" and STATUS_RE.match(line):
-                            return line
-                        if line == "ok" and command != "?":
-                            return line
-                        if line.startswith("error:"):
-                            code = _int(line[6:])
-                            if code in (1, 2, 20) and attempt < self.retries:  # our line arrived garbled
-                                self.faults_recovered += 1
-                                break
-                            raise GrblError(f"drives ({self.link.url}): {command!r} -> {line} "
-                                            f"({ERROR_CODES.get(code, 'unknown error')})")
-                        if line.startswith("ALARM:"):
-                            code = _int(line[6:])
-                            raise GrblError(f"drives ({self.link.url}): {command!r} -> {line} "
-                                            f"({ALARM_CODES.get(code, 'alarm')})",
-                                            "the drives stopped; home them ($H) and check the plan's reach")
-                        if line.startswith("Grbl "):  # the banner: the controller just reset
-                            if self.homed:  # state we relied on is gone
-                                self.homed = False
-                                raise DeviceResetError("drives reset")
-                            continue  # the greeting of a fresh connection
-                        self.faults_recovered += 1  # garbage or a truncated line: keep listening
-                except LinkTimeoutError:
-                    self.faults_recovered += 1
-                    continue
-                except DisconnectedError:
-                    self.faults_recovered += 1
-                    self.link.reconnect()
+        def answer(line: str) -> str | None:
+            line = line.strip()
+            if command == "?" and STATUS_RE.match(line):
+                return line
+            if line == "ok" and command != "?":
+                return line
+            if line.startswith("error:"):
+                code = _int(line[6:])
+                if code in (1, 2, 20):  # our line arrived garbled
+                    raise RequestDamagedError(f"{command!r} -> {line}")
+                raise GrblError(f"drives ({self.link.url}): {command!r} -> {line} "
+                                f"({ERROR_CODES.get(code, 'unknown error')})")
+            if line.startswith("ALARM:"):
+                code = _int(line[6:])
+                raise GrblError(f"drives ({self.link.url}): {command!r} -> {line} ({ALARM_CODES.get(code, 'alarm')})",
+                                "the drives stopped; home them ($H) and check the plan's reach")
+            if line.startswith("Grbl "):  # the banner: the controller just reset
+                if self.homed:  # state we relied on is gone
                     self.homed = False
-                    raise DeviceResetError("drives reconnected") from None
-            raise LinkError(f"drives at {self.link.url}: no valid answer to {command!r} after {self.retries + 1} "
-                            "tries", "check the connection (baud rate, cable) and resume")
+                    raise DeviceResetError("drives reset")
+                return None  # the greeting of a fresh connection
+            self._protocol_faults += 1  # garbage or a truncated line: keep listening
+            return None
+
+        return self.link.exchange(lambda: command, answer, retries=self.retries, on_reconnect=self._reconnected,
+                                  timeout_s=timeout_s)
+
+    def _reconnected(self) -> DeviceResetError:
+        self.homed = False
+        return DeviceResetError("drives reconnected")
 
     def _check_reset(self) -> None:
         if self.link.reconnects != self._seen_reconnects:
@@ -146,7 +139,7 @@ class GrblDrives:
                 self.homed = False
                 raise DeviceResetError("drives in alarm")
             if state == "Idle":  # the move was lost (e.g. an ok taken for another's): redo the step
-                self.faults_recovered += 1
+                self._protocol_faults += 1
                 raise DeviceResetError("drives idle away from the target")
         raise LinkError(f"drives at {self.link.url} did not reach u={u_m:.4f} v={v_m:.4f} m",
                         "check the drives for blocked axes or lost steps")

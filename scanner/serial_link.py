@@ -1,8 +1,8 @@
 """Line-framed serial transport over a pyserial URL (a real port, `socket://host:port`, `loop://`).
 
-Framing only: bytes in, lines out, with a deadline on every read and reconnection when the device goes away.
-Protocols (GRBL in scanner/grbl.py, the wall scanner in scanner/wallscanner.py) sit on top and own the
-command/response logic; each takes the link's lock for a whole exchange.
+Framing and recovery: bytes in, lines out, with a deadline on every read, reconnection when the device goes
+away, and `exchange()`, the one retry loop for request/answer protocols. The protocols (GRBL in
+scanner/grbl.py, the wall scanner in scanner/wallscanner.py) sit on top and say only what their lines mean.
 """
 
 from __future__ import annotations
@@ -10,6 +10,8 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections.abc import Callable
+from typing import TypeVar
 
 import serial
 
@@ -29,6 +31,17 @@ class LinkTimeoutError(Exception):
 
 class DisconnectedError(Exception):
     """The transport went away (recoverable: reconnect, then the protocol resynchronises)."""
+
+
+class DeviceResetError(Exception):
+    """The device was reset or reconnected: state (position, buffers) was lost; redo the current step."""
+
+
+class RequestDamagedError(Exception):
+    """The device says our request arrived damaged: `exchange()` sends it again."""
+
+
+Answer = TypeVar("Answer")
 
 
 class SerialLink:
@@ -51,6 +64,7 @@ class SerialLink:
         self._port: serial.SerialBase | None = None
         self._buffer = bytearray()
         self.garbage_lines = 0
+        self.faults_recovered = 0  # timeouts, resends and reconnects that exchange() got over
 
     # ------------------------------------------------------------------ connection
     def open(self) -> None:
@@ -88,6 +102,38 @@ class SerialLink:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    # ------------------------------------------------------------------ request / answer
+    def exchange(self, request: Callable[[], str], answer: Callable[[str], Answer | None], *, retries: int,
+                 on_reconnect: Callable[[], Exception], timeout_s: float | None = None) -> Answer:
+        """Send request() and give each line that comes back to answer() until it returns a value.
+
+        answer returns None to keep listening (noise, a stale line), raises RequestDamagedError when the device reports
+        the request damaged, and raises the protocol's own errors for what a person must see. A timeout or a
+        RequestDamagedError sends a fresh request() again, at most `retries` times more, then LinkError. A disconnect
+        reconnects and raises the error on_reconnect() returns, once the protocol has dropped the state the
+        device lost. Holds the lock for the whole exchange, so no other request's lines are taken for ours.
+        """
+        last_fault, line = "", ""
+        with self.lock:
+            for _ in range(retries + 1):
+                try:
+                    self.drain()
+                    line = request()
+                    self.write_line(line)
+                    while (value := answer(self.read_line(timeout_s))) is None:
+                        pass
+                    return value
+                except (LinkTimeoutError, RequestDamagedError) as fault:
+                    self.faults_recovered += 1
+                    last_fault = str(fault)
+                except DisconnectedError:
+                    self.faults_recovered += 1
+                    self.reconnect()
+                    raise on_reconnect() from None
+        raise LinkError(f"{self.name} at {self.url}: no valid answer to {line!r} after {retries + 1} tries "
+                        f"(last: {last_fault})",
+                        "check the connection (cable, baud rate, power), then resume")
 
     # ------------------------------------------------------------------ lines
     def write_line(self, text: str) -> None:

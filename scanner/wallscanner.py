@@ -32,8 +32,7 @@ import zlib
 import numpy as np
 
 from geometry.errors import InputError
-from scanner.grbl import DeviceResetError
-from scanner.serial_link import DisconnectedError, LinkError, LinkTimeoutError, SerialLink
+from scanner.serial_link import DeviceResetError, LinkError, RequestDamagedError, SerialLink
 
 GET_CHUNK = 200
 COUNTS_MAX = 1000
@@ -68,7 +67,12 @@ class WallScanner:
         self.retries = retries
         self._next_id = 1
         self._seen_reconnects = link.reconnects
-        self.faults_recovered = 0
+        self._protocol_faults = 0
+
+    @property
+    def faults_recovered(self) -> int:
+        """Faults got over so far: the link's (timeouts, resends, reconnects) and the protocol's own."""
+        return self.link.faults_recovered + self._protocol_faults
 
     def _new_id(self) -> int:
         value = self._next_id
@@ -82,48 +86,39 @@ class WallScanner:
 
     def request(self, command: str, multi: bool = False) -> list[list[str]]:
         """Send `command`; return the answer's fields (one list per line; for multi, all lines up to END)."""
+        tag = ""
+        lines: list[list[str]] = []
+
+        def tagged_request() -> str:
+            nonlocal tag
+            tag = f"#{self._new_id()}"  # a fresh id per try: a late answer to an earlier try is ignored
+            lines.clear()
+            return frame_line(f"{tag} {command}")
+
+        def answer(line: str) -> list[list[str]] | None:
+            body = unframe_line(line)
+            fields = body.split() if body is not None else []
+            if len(fields) < 2 or fields[0] != tag:
+                self._protocol_faults += 1  # bad checksum, stale answer or noise
+                return None
+            if fields[1] == "ERR":
+                code = int(fields[2]) if len(fields) > 2 and fields[2].isdigit() else -1
+                if code == 2:  # our request arrived damaged
+                    raise RequestDamagedError(f"{command!r} -> {' '.join(fields[1:])}")
+                if code == 3:
+                    raise DeviceResetError("scanner lost its buffer")
+                raise ScannerError(f"scanner ({self.link.url}): {command!r} -> {' '.join(fields[1:])}")
+            lines.append(fields[1:])
+            return lines if not multi or fields[1] == "END" else None
+
         with self.link.lock:
             self._check_reset()
-            for _ in range(self.retries + 1):
-                request_id = self._new_id()
-                tag = f"#{request_id}"
-                try:
-                    self.link.drain()
-                    self.link.write_line(frame_line(f"{tag} {command}"))
-                    lines: list[list[str]] = []
-                    while True:
-                        body = unframe_line(self.link.read_line())
-                        if body is None:
-                            self.faults_recovered += 1
-                            continue
-                        fields = body.split()
-                        if not fields or fields[0] != tag or len(fields) < 2:
-                            self.faults_recovered += 1  # stale answer or noise
-                            continue
-                        if fields[1] == "ERR":
-                            code = int(fields[2]) if len(fields) > 2 and fields[2].isdigit() else -1
-                            if code == 2:  # our request arrived damaged: send it again
-                                self.faults_recovered += 1
-                                break
-                            if code == 3:
-                                raise DeviceResetError("scanner lost its buffer")
-                            raise ScannerError(f"scanner ({self.link.url}): {command!r} -> {' '.join(fields[1:])}")
-                        if not multi:
-                            return [fields[1:]]
-                        if fields[1] == "END":
-                            lines.append(fields[1:])
-                            return lines
-                        lines.append(fields[1:])
-                except LinkTimeoutError:
-                    self.faults_recovered += 1
-                    continue
-                except DisconnectedError:
-                    self.faults_recovered += 1
-                    self.link.reconnect()
-                    self._seen_reconnects = self.link.reconnects
-                    raise DeviceResetError("scanner reconnected") from None
-            raise LinkError(f"scanner at {self.link.url}: no valid answer to {command!r} after {self.retries + 1} "
-                            "tries", "check the connection and resume")
+            return self.link.exchange(tagged_request, answer, retries=self.retries,
+                                      on_reconnect=self._reconnected)
+
+    def _reconnected(self) -> DeviceResetError:
+        self._seen_reconnects = self.link.reconnects
+        return DeviceResetError("scanner reconnected")
 
     def _ok_value(self, command: str) -> str:
         fields = self.request(command)[0]
@@ -164,7 +159,7 @@ class WallScanner:
                 try:
                     k, t, a, b, c = (int(v) for v in fields[1:])
                 except ValueError:
-                    self.faults_recovered += 1
+                    self._protocol_faults += 1
                     continue
                 if not first <= k < first + chunk:
                     continue
