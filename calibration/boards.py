@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -142,10 +143,12 @@ def read_gray(path: str | Path) -> NDArray[np.uint8]:
     return img
 
 
-def _as_gray(image: NDArray) -> NDArray[np.uint8]:
+def as_gray(image: NDArray, channel_order: Literal["bgr", "rgb"] = "bgr") -> NDArray[np.uint8]:
+    """A grey uint8 image from a grey or colour one. channel_order: "bgr" as OpenCV reads files and cameras,
+    "rgb" as arproj's renderer and simulated cameras give them."""
     img = np.asarray(image)
     if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+        img = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY if channel_order == "rgb" else cv2.COLOR_BGR2GRAY)
     if img.dtype != np.uint8:
         img = np.clip(img, 0, 255).astype(np.uint8)
     return img
@@ -195,7 +198,7 @@ def refine_scattered_corners(gray: NDArray[np.uint8], corners: NDArray[np.float6
 
 def detect(board: Board, image: NDArray, source: str = "") -> BoardView | None:
     """Find the board in an image (grey or BGR uint8); None when it is not (fully) visible."""
-    gray = _as_gray(image)
+    gray = as_gray(image)
     size = (gray.shape[1], gray.shape[0])
     if board.kind == "chessboard":
         flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from mapping import tolerances as tol
 from mapping.fusion import FusionParams, InductiveModel, _raw, _sigmoid
 from mapping.objects import MapObject, _join, distances_to_polyline
-from scanner.peaks import PeakConfig, detect_peaks
+from scanner.peaks import PeakConfig, detect_peaks, level_crossings
 
 RANSAC_INLIER_M = 0.004  # a peak this close to a line belongs to it
 RANSAC_PAIRS = 400
@@ -96,21 +96,10 @@ def _height_width(along: NDArray[np.float64], v: NDArray[np.float64], position: 
     k = int(np.clip(np.searchsorted(along, position), 0, len(along) - 1))
     lo, hi = max(0, k - 3), min(len(v), k + 4)
     top = float(np.median(np.sort(v[lo:hi])[-3:]))  # robust to one noisy sample
-    half = base + 0.5 * (top - base)
-    left = k
-    while left > 0 and v[left] > half:
-        left -= 1
-    right = k
-    while right < len(v) - 1 and v[right] > half:
-        right += 1
-    if v[left] > half or v[right] > half:
+    crossings = level_crossings(along, v, k, base + 0.5 * (top - base))
+    if crossings is None:
         return top - base, float("nan")
-
-    def cross(i: int, j: int) -> float:
-        return float(along[i] + (half - v[i]) * (along[j] - along[i]) / (v[j] - v[i])) if v[j] != v[i] \
-            else float(along[i])
-
-    return top - base, cross(right - 1, right) - cross(left, left + 1)
+    return top - base, crossings[1] - crossings[0]
 
 
 def _fit(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

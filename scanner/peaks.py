@@ -55,19 +55,26 @@ def detect_peaks(coord: np.ndarray, values: np.ndarray, config: PeakConfig | Non
     idx = idx - 1
     peaks = []
     for i in idx:
-        half = 0.5 * above[i]
-        left = i
-        while left > 0 and above[left] > half:
-            left -= 1
-        right = i
-        while right < len(above) - 1 and above[right] > half:
-            right += 1
-        if above[left] > half or above[right] > half:
+        crossings = level_crossings(grid, above, int(i), 0.5 * above[i])
+        if crossings is None:
             continue  # cut off by the end of the pass: its centre is unknown
-        x_left = _crossing(grid, above, left, left + 1, half)
-        x_right = _crossing(grid, above, right - 1, right, half)
+        x_left, x_right = crossings
         peaks.append(Peak(position=0.5 * (x_left + x_right), height=float(above[i]), width=x_right - x_left))
     return peaks
+
+
+def level_crossings(x: np.ndarray, y: np.ndarray, i: int, level: float) -> tuple[float, float] | None:
+    """Where the sampled profile y(x) falls to `level` left and right of sample i, interpolated linearly (the
+    half-maximum points of a peak); None when it does not fall that low before an end of the profile."""
+    left = i
+    while left > 0 and y[left] > level:
+        left -= 1
+    right = i
+    while right < len(y) - 1 and y[right] > level:
+        right += 1
+    if y[left] > level or y[right] > level:
+        return None
+    return _crossing(x, y, left, left + 1, level), _crossing(x, y, right - 1, right, level)
 
 
 def _crossing(x: np.ndarray, y: np.ndarray, i: int, j: int, level: float) -> float:

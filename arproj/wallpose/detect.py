@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from arproj.wallpose import limits
 from arproj.wallpose.pattern import MARKER_DICTIONARY, CheckerPattern
+from calibration.boards import as_gray
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 
@@ -99,15 +100,6 @@ def find_markers(gray: NDArray[np.uint8], pattern: CheckerPattern) -> dict[int, 
         if 0 <= marker_id < n_markers and marker_id not in found:
             found[int(marker_id)] = (c.reshape(4, 2).astype(np.float64) + 0.5) / scale - 0.5
     return found
-
-
-def _to_gray(image: NDArray) -> NDArray[np.uint8]:
-    image = np.asarray(image)
-    if image.ndim == 3:
-        image = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
-    if image.dtype != np.uint8:
-        image = np.clip(image, 0, 255).astype(np.uint8)
-    return image
 
 
 def _apply_h(H: NDArray[np.float64], xy: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -251,7 +243,7 @@ def detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, projecto
 
 def _detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, projector: Intrinsics,
             camera_name: str, max_corners: int | None) -> Detection:
-    gray = _to_gray(image)
+    gray = as_gray(image, channel_order="rgb")
     if gray.shape != (camera.height, camera.width):
         raise InputError(f"{camera_name}: image is {gray.shape[1]}x{gray.shape[0]} but the calibration is for "
                          f"{camera.width}x{camera.height}", "use the rig calibrated for this camera")

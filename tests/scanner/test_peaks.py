@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from scanner.extract import evaluate
-from scanner.peaks import detect_peaks
+from scanner.peaks import detect_peaks, level_crossings
 from scanner.wall import random_wall
 
 
@@ -40,3 +40,11 @@ def test_evaluation_against_the_truth():
     assert evaluate(wall, shifted).mean_error_m == pytest.approx(0.01, abs=0.002)
     far = [s + np.array([0.05, 0.05]) for s in exact]
     assert evaluate(wall, far).recall < 0.5
+
+
+def test_level_crossings_are_interpolated_between_samples_and_none_for_a_cut_off_peak():
+    x = np.arange(11, dtype=np.float64) * 0.01  # a triangle peak of height 10 at x = 0.05
+    y = 10.0 - np.abs(np.arange(11) - 5.0) * 2.0
+    left, right = level_crossings(x, y, 5, 5.0)
+    assert left == pytest.approx(0.025) and right == pytest.approx(0.075)
+    assert level_crossings(x, y, 5, -1.0) is None  # never falls that low inside the profile
