@@ -171,7 +171,27 @@ def _report(step: str, result: dict[str, Any]) -> None:
                       highlight=False)
     truth = result.get("truth_errors")
     if truth:
-        console.print(f"  vs simulated truth: {json.dumps(truth, default=_plain)[:300]}", highlight=False)
+        console.print(f"  vs simulated truth: {truth_summary(truth)}", highlight=False)
+
+
+# Unit of a figure by the end of its key, as the truth checks name them.
+_UNITS = {"_pct": " %", "_px": " px", "_mm": " mm", "_deg": "°", "_m": " m"}
+
+
+def truth_summary(truth: dict[str, Any]) -> str:
+    """A truth check's errors on one line with their units: "fx 0.016 %, cx 0.03 px; baseline -0.02 mm".
+
+    Per-angle lists are left out (their worst is a figure of its own); the wizard's JSON state keeps them.
+    """
+    parts = []
+    for key, value in truth.items():
+        if isinstance(value, dict):
+            parts.append(f"{key.replace('_', ' ')}: " + truth_summary(value).replace("; ", ", "))
+        elif not isinstance(value, list | tuple):
+            suffix = next((s for s in _UNITS if key.endswith(s)), "")
+            name = key[: len(key) - len(suffix)].replace("_", " ")
+            parts.append(f"{name} {float(value):.3g}{_UNITS.get(suffix, '')}")
+    return "; ".join(parts)
 
 
 def _guide(out: Path, state: dict[str, Any]) -> dict[str, Any]:

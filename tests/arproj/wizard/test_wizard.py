@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from arproj.wizard import STATE_FILE, next_step, run_wizard
+from arproj.wizard import STATE_FILE, next_step, run_wizard, truth_summary
 from geometry.errors import InputError
 from geometry.rig import Rig
 
@@ -40,3 +40,9 @@ def test_corrupt_state_file_is_an_input_error(tmp_path: Path) -> None:
         run_wizard(tmp_path, sim=True)
     with pytest.raises(InputError, match="not a step"):
         run_wizard(tmp_path, sim=True, restart=True, stop_after="lunch")
+
+
+def test_truth_errors_are_printed_as_named_figures_with_units() -> None:
+    line = truth_summary({"camera_left": {"fx_pct": 0.0157, "cx_px": -0.1}, "baseline_mm": -0.02,
+                          "stereo_rotation_deg": 0.0031, "distance_m": 2.016, "position_mm": [1.2, 1.5]})
+    assert line == "camera left: fx 0.0157 %, cx -0.1 px; baseline -0.02 mm; stereo rotation 0.0031°; distance 2.02 m"
