@@ -18,6 +18,9 @@ from rich.table import Table
 
 from arproj.console import console
 
+# Quick runs take fewer trials: a target's "met" there is a hint, not the verdict.
+QUICK_CAVEAT = " (--quick: indicative only, judged on the full run)"
+
 
 @dataclass
 class BenchTable:
@@ -58,7 +61,8 @@ class BenchTable:
         for note in self.notes:
             console.print(f"  {note}", highlight=False)
         if targets and self.headline:
-            console.print(headline_table([(self.name, self.headline)], title="targets", with_benchmark=False))
+            title = "targets" + (QUICK_CAVEAT if self.environment.get("quick") else "")
+            console.print(headline_table([(self.name, self.headline)], title=title, with_benchmark=False))
 
 
 def headline_table(sections: list[tuple[str, dict[str, dict[str, Any]]]], title: str,

@@ -8,7 +8,7 @@ import sys
 
 import typer
 
-from arproj.bench import BenchTable, benchmark_modules, headline_table
+from arproj.bench import QUICK_CAVEAT, BenchTable, benchmark_modules, headline_table
 from arproj.console import console, err_console
 
 
@@ -22,6 +22,7 @@ def _command(name: str, module):
         # Whatever a benchmark says while it runs goes to stderr: stdout carries only the table (or the JSON).
         with contextlib.redirect_stdout(sys.stderr):
             table: BenchTable = module.run(quick=quick, seed=seed)
+        table.environment["quick"] = quick
         if as_json:
             print(table.to_json())
         else:
@@ -56,7 +57,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                               for n, t in results.items()}, indent=2))
             return
         summary = headline_table([(n, t.headline) for n, t in results.items() if isinstance(t, BenchTable)],
-                                 title="arproj bench all — headline figures")
+                                 title="arproj bench all — headline figures" + (QUICK_CAVEAT if quick else ""))
         for name, table in results.items():
             if isinstance(table, str):
                 summary.add_row(name, "failed", "–", "–", "", "", "NO")

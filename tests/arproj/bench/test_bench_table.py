@@ -54,3 +54,14 @@ def test_json_round_trip_keeps_the_table() -> None:
     table = _wide_table()
     again = BenchTable(**json.loads(table.to_json()))
     assert again == table
+
+
+def test_a_quick_run_says_its_targets_are_only_indicative() -> None:
+    table = _wide_table()
+    with console.capture() as captured:
+        table.print()
+    assert "indicative" not in captured.get()
+    table.environment["quick"] = True
+    with console.capture() as captured:
+        table.print()
+    assert "indicative" in captured.get() and "judged on the full run" in captured.get()
