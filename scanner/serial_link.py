@@ -108,11 +108,12 @@ class SerialLink:
                  on_reconnect: Callable[[], Exception], timeout_s: float | None = None) -> Answer:
         """Send request() and give each line that comes back to answer() until it returns a value.
 
-        answer returns None to keep listening (noise, a stale line), raises RequestDamagedError when the device reports
-        the request damaged, and raises the protocol's own errors for what a person must see. A timeout or a
-        RequestDamagedError sends a fresh request() again, at most `retries` times more, then LinkError. A disconnect
-        reconnects and raises the error on_reconnect() returns, once the protocol has dropped the state the
-        device lost. Holds the lock for the whole exchange, so no other request's lines are taken for ours.
+        answer returns None to keep listening (noise, a stale line), raises RequestDamagedError when the
+        device reports the request damaged, and raises the protocol's own errors for what a person must see.
+        A timeout or a RequestDamagedError sends a fresh request() again, at most `retries` times more, then
+        LinkError. A disconnect reconnects and raises the error on_reconnect() returns, once the protocol has
+        dropped the state the device lost. Holds the lock for the whole exchange, so no other request's lines
+        are taken for ours.
         """
         last_fault, line = "", ""
         with self.lock:
