@@ -77,5 +77,8 @@ def rotation_angle_deg(R_a: ArrayLike, R_b: ArrayLike | None = None) -> float:
     R = np.asarray(R_a, dtype=np.float64)[:3, :3]
     if R_b is not None:
         R = R.T @ np.asarray(R_b, dtype=np.float64)[:3, :3]
-    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    return float(np.degrees(np.arccos(c)))
+    # atan2 of sine and cosine parts: arccos of the trace alone cannot resolve angles below ~1e-6° (one ulp
+    # of cos near 1 is already 8.5e-7°), which hid exact fits behind round-off.
+    s = 0.5 * np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    c = (np.trace(R) - 1.0) / 2.0
+    return float(np.degrees(np.arctan2(s, c)))

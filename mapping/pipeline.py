@@ -29,7 +29,7 @@ from mapping.objects import (
     near_lines,
 )
 from mapping.stitching import FrameGraph, laser_constraints
-from scanner.log import ScanLog
+from scanner.log import DamagedLogError, ScanLog
 
 STITCH_ROUNDS = 2  # feature pairing + alignment rounds (the second re-pairs and re-linearises)
 SPARSE_COVERAGE = 0.6  # below this fraction of the wall's cells observed, lines come from the passes' peaks
@@ -56,9 +56,9 @@ def load_scan(path: str | Path) -> ScanData:
     warnings: list[str] = []
     try:
         log = ScanLog.open(path)
-    except sqlite3.DatabaseError as err:
-        raise InputError(f"{path}: cannot read the scan log ({err})", "is it a scan log from `arproj scan`?") \
-            from None
+    except DamagedLogError as err:
+        warnings.append(f"{err}; reading the passes that are sound")
+        log = ScanLog.open(path, salvage=True)
     with log:
         try:
             frames = log.frames()

@@ -105,6 +105,14 @@ CREATE INDEX IF NOT EXISTS samples_by_pass ON samples(pass_id);
 """
 
 
+SQLITE_CORRUPT = 11  # SQLite's primary result code for a damaged database file
+
+
+class DamagedLogError(InputError):
+    """SQLite reports the log file as damaged (truncated or overwritten pages); ScanLog.open(salvage=True)
+    reads what is left."""
+
+
 class ScanLog:
     """A scan log file (see the module docstring for the format). Use `create` to write, `open` to read."""
 
@@ -141,15 +149,19 @@ class ScanLog:
         return cls(path, db, writable=True)
 
     @classmethod
-    def open(cls, path: str | Path, writable: bool = False) -> ScanLog:
-        """Open an existing log (read-only unless writable). Raises InputError if it is not a scan log."""
+    def open(cls, path: str | Path, writable: bool = False, salvage: bool = False) -> ScanLog:
+        """Open an existing log (read-only unless writable). Raises InputError if it is not a scan log, and
+        DamagedLogError (an InputError) if SQLite finds it damaged, e.g. truncated by a full disk or a copy cut
+        short. salvage=True (read-only) opens such a file anyway, so that its sound pages can be read."""
         path = Path(path)
         if not path.is_file():
             raise InputError(f"{path}: scan log not found", "give the path passed to --log when scanning")
         try:
-            db = _connect(path, readonly=not writable)
+            db = _connect(path, readonly=not writable or salvage, salvage=salvage)
             names = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
         except sqlite3.DatabaseError as err:
+            if getattr(err, "sqlite_errorcode", None) == SQLITE_CORRUPT:
+                raise DamagedLogError(f"{path}: the scan log is damaged (SQLite says: {err})") from None
             raise InputError(f"{path}: not a scan log (SQLite says: {err})") from None
         if not {"meta", "frames", "passes", "samples"} <= names:
             raise InputError(f"{path}: not a scan log (tables meta/frames/passes/samples missing)")
@@ -285,9 +297,13 @@ class ScanLog:
         return {int(r[0]) for r in self._db.execute("SELECT frame_id FROM frames")}
 
 
-def _connect(path: Path, readonly: bool = False) -> sqlite3.Connection:
+def _connect(path: Path, readonly: bool = False, salvage: bool = False) -> sqlite3.Connection:
     if readonly:
         db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=10.0)
+        if salvage:
+            # SQLite refuses a file shorter than its header's page count unless writable_schema is on; on a
+            # read-only connection that only lets the pages that are there be read.
+            db.execute("PRAGMA writable_schema=ON")
     else:
         db = sqlite3.connect(str(path), timeout=10.0)
         db.execute("PRAGMA journal_mode=WAL")

@@ -34,3 +34,23 @@ def gl_context() -> Iterator[object]:
     ctx = create_context()
     yield ctx
     ctx.release()
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """A test that uses the GL context renders: it carries the `gl` marker whether or not it says so."""
+    for item in items:
+        if "gl_context" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.gl)
+
+
+@pytest.fixture(autouse=True)
+def _gl_error_free(request: pytest.FixtureRequest) -> Iterator[None]:
+    """Around every test that uses the GL context: no GL error before it (a clean start) or after it, as
+    moderngl's own suite checks."""
+    if "gl_context" not in request.fixturenames:
+        yield
+        return
+    ctx = request.getfixturevalue("gl_context")
+    assert ctx.error == "GL_NO_ERROR", "a GL error was left by an earlier test"
+    yield
+    assert ctx.error == "GL_NO_ERROR", f"{request.node.name} left a GL error"

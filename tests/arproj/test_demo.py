@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import cv2
@@ -19,6 +20,8 @@ from arproj import demo
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, transform_points
+
+pytestmark = pytest.mark.gl  # the demo renders the pre-warped frame and the camera's photograph through EGL
 
 SEED = 0
 WALL_YAML = """format: arproj-wall/1
@@ -157,9 +160,11 @@ def test_projected_map_lands_on_the_true_lines_in_the_photograph(finished_demo) 
     assert np.median(on_lines) > np.median(beside) + LINE_BRIGHTER_GREY
 
 
-def test_resume_of_a_finished_run_keeps_every_figure(finished_demo) -> None:
+def test_resume_of_a_finished_run_keeps_every_figure(finished_demo, tmp_path: Path) -> None:
     ctx, out, wall = finished_demo
-    again = demo.run_demo(demo.DemoOptions(out=out, wall=wall, quick=True, seed=SEED, rig=ctx.options.rig,
+    copy = tmp_path / "out"  # a copy: the shared run stays as the other tests read it
+    shutil.copytree(out, copy)
+    again = demo.run_demo(demo.DemoOptions(out=copy, wall=wall, quick=True, seed=SEED, rig=ctx.options.rig,
                                            resume=True))
     assert all(r.status == "skipped" for r in again.stages.values())
     assert again.figures["pre-warp"] == ctx.figures["pre-warp"]

@@ -51,3 +51,12 @@ def test_pose_names_use_known_frames() -> None:
         parse_pose_name("T_wall_from_beamer")
     with pytest.raises(InputError, match="T_<dst>_from_<src>"):
         parse_pose_name("wall_to_projector")
+
+
+@pytest.mark.parametrize("angle_rad", [1e-12, 1e-9, 1e-6, 0.3, 2.0, np.pi - 1e-6])
+def test_rotation_angle_is_exact_from_tiny_to_half_turn(angle_rad: float) -> None:
+    axis = np.array([0.3, -0.5, 0.8])
+    R = rotation_about(axis, angle_rad)
+    # Relative error of a few float64 ulps of the matrix entries: 1e-9 relative allows the products inside.
+    assert rotation_angle_deg(R) == pytest.approx(np.degrees(angle_rad), rel=1e-9, abs=1e-14)
+    assert rotation_angle_deg(np.eye(3), R) == pytest.approx(np.degrees(angle_rad), rel=1e-9, abs=1e-14)

@@ -16,8 +16,10 @@ from scanner.wall import shipped_walls
 pytestmark = pytest.mark.gl
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def running(gl_context):
+    """A fresh site and session for each test: the tests nudge the robot and slip the head, so none may see
+    another's changes (about 3.5 s each)."""
     from arproj.sim.site import Site
 
     site = Site.build(seed=3, ctx=gl_context, robot={"distance_m": 2.2, "incidence_deg": 20.0})

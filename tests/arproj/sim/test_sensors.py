@@ -88,13 +88,30 @@ def test_l_shaped_room_truth_and_laser() -> None:
     assert np.all(landing.wall_index[400:, 640] == 0)
 
 
+@pytest.mark.gl
 def test_pictures_and_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                           monkeypatch: pytest.MonkeyPatch) -> None:
     small = {"cameras": {"width": 640, "height": 400}, "projector": {"width": 640, "height": 400}}
+    import cv2
+
+    from arproj.sim.patterns import expected_camera_pixels
+
     with Site.build(small, seed=0) as site:
         paths = write_site_pictures(site, tmp_path / "pics")
+        # The test pattern's centre cross is lit; 40 px off it along the diagonal the pattern is black.
+        centre = np.array([[site.projector.width // 2, site.projector.height // 2]], dtype=np.float64)
+        spots = {camera: expected_camera_pixels(site, camera, np.vstack([centre, centre + 40])).round().astype(int)
+                 for camera in ("camera_left", "camera_right")}
     assert [p.name for p in paths] == ["camera_left.png", "camera_right.png", "ground_truth.png", "site_plan.png"]
-    assert all(p.stat().st_size > 10_000 for p in paths)
+    for camera, ((c_lit, r_lit), (c_dark, r_dark)) in spots.items():
+        photo = cv2.imread(str(tmp_path / "pics" / f"{camera}.png"), cv2.IMREAD_GRAYSCALE)
+        assert photo.shape == (400, 640)
+        # the saved photo shows the pattern where the projector put it (3x3 max: the cross is 3 px wide)
+        lit = int(photo[r_lit - 1:r_lit + 2, c_lit - 1:c_lit + 2].max())
+        assert lit > int(photo[r_dark, c_dark]) + 40
+    for name in ("ground_truth.png", "site_plan.png"):
+        figure = cv2.imread(str(tmp_path / "pics" / name))
+        assert figure is not None and figure.shape[1] > figure.shape[0] and figure.std() > 10  # a drawing
     # A bad scene file: one line naming the key and value, exit status 2, no traceback.
     from arproj.cli import main
 

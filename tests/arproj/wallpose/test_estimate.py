@@ -98,4 +98,5 @@ def test_robot_moved_between_the_images_is_declined(case_2m_30) -> None:
     right = moved.photograph("camera_right", img)
     with pytest.raises(NotEnoughEvidenceError) as err:
         estimate_plane(left, right, case_2m_30.pattern, case_2m_30.views)
-    assert err.value.code in ("views_disagree", "not_one_plane", "too_few_corners")
+    # The pattern is still one plane with every corner found: only the views' disagreement can tell.
+    assert err.value.code == "views_disagree" and "move" in str(err.value)

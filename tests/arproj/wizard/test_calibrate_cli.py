@@ -70,7 +70,10 @@ def test_stereo_writes_camera_info_and_rig_with_quality(arproj: Callable[..., Do
     assert -0.09 < T[0, 3] < -0.07
     assert rig.quality["stereo"]["reprojection_rms_px"] == figures["reprojection_rms_px"]
     assert (out / "camera_left.yaml").read_text().startswith("image_width: 640")
-    assert (out / "stereo_coverage.png").stat().st_size > 10_000
+    import cv2
+
+    coverage = cv2.imread(str(out / "stereo_coverage.png"))
+    assert coverage is not None and coverage.std() > 10  # decodes, and draws something
 
 
 @pytest.mark.realdata
