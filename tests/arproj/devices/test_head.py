@@ -4,12 +4,15 @@ import pytest
 
 from arproj.devices import DeviceError, DeviceTimeoutError, HeadFaults, HeadSimulator, PanTiltHead
 
+# Half the Pelco-D 0.01° step, plus float round-off: the simulator settles on the commanded step.
+STEP_DEG = 0.006
+
 
 def test_move_and_query_reach_the_commanded_angles():
     with HeadSimulator(speed_deg_s=400.0) as sim, PanTiltHead(sim.url, timeout_s=0.1) as head:
         reported = head.move_to(12.34, -7.5)
-        assert reported == pytest.approx((12.34, -7.5), abs=0.006)
-        assert sim.reported_deg() == pytest.approx((12.34, -7.5), abs=0.006)
+        assert reported == pytest.approx((12.34, -7.5), abs=STEP_DEG)
+        assert sim.reported_deg() == pytest.approx((12.34, -7.5), abs=STEP_DEG)
         assert head.retries_used == 0
 
 
@@ -18,7 +21,7 @@ def test_faults_are_retried_and_the_move_still_completes():
     with HeadSimulator(speed_deg_s=400.0, faults=faults, seed=7) as sim, \
             PanTiltHead(sim.url, timeout_s=0.05, retries=6) as head:
         for pan, tilt in [(5.0, 2.0), (-20.0, 10.0), (0.5, -3.25)]:
-            assert head.move_to(pan, tilt) == pytest.approx((pan, tilt), abs=0.006)
+            assert head.move_to(pan, tilt) == pytest.approx((pan, tilt), abs=STEP_DEG)
         assert sim.faults_injected > 0
         assert head.retries_used > 0
 
@@ -26,8 +29,8 @@ def test_faults_are_retried_and_the_move_still_completes():
 def test_slip_is_invisible_to_the_encoder():
     faults = HeadFaults(slip_deg=(0.4, -0.2))
     with HeadSimulator(speed_deg_s=400.0, faults=faults) as sim, PanTiltHead(sim.url, timeout_s=0.1) as head:
-        assert head.move_to(10.0, 5.0) == pytest.approx((10.0, 5.0), abs=0.006)
-        assert sim.true_deg() == pytest.approx((10.4, 4.8), abs=0.006)
+        assert head.move_to(10.0, 5.0) == pytest.approx((10.0, 5.0), abs=STEP_DEG)
+        assert sim.true_deg() == pytest.approx((10.4, 4.8), abs=STEP_DEG)
 
 
 def test_a_dead_head_gives_a_clear_timeout():
@@ -54,5 +57,5 @@ def test_a_head_that_vanishes_and_comes_back_is_reconnected():
     with HeadSimulator(speed_deg_s=400.0) as sim, PanTiltHead(sim.url, timeout_s=0.05) as head:
         head.move_to(4.0, 2.0)
         sim.drop_connections()
-        assert head.position() == pytest.approx((4.0, 2.0), abs=0.006)
+        assert head.position() == pytest.approx((4.0, 2.0), abs=STEP_DEG)
         assert head.reconnects == 1

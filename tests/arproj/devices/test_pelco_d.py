@@ -14,6 +14,7 @@ def test_frame_layout_and_checksum_match_the_protocol():
 
 @pytest.mark.parametrize("angle", [0.0, 0.01, 45.5, 179.99, -0.01, -30.0, -179.99])
 def test_angles_round_trip_at_the_protocol_resolution(angle):
+    # half the protocol's 0.01° step (rounded to the nearest)
     assert pelco_d.data_to_angle(pelco_d.angle_to_data(angle)) == pytest.approx(angle, abs=0.005)
 
 

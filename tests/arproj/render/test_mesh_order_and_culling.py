@@ -68,7 +68,7 @@ def test_culling_keeps_every_triangle_that_lands_in_the_image() -> None:
     lands = on_image[faces].any(axis=1)
     assert lands.any()
     assert kept[lands].all()
-    assert kept.mean() < 0.6  # and most of the wall, out of view, is not drawn
+    assert kept.mean() < 0.5  # and most of the wall, out of view, is not drawn (most: over half)
     away = look_at([1.0, 1.0, 1.5], [1.0, 1.0, 3.0], up=[0, 1, 0])  # looking away from the wall
     assert chunks.visible_ranges(_clip(away)) == []
 
@@ -92,7 +92,7 @@ def test_a_culled_render_equals_an_unculled_one(gl_context: moderngl.Context) ->
         item = renderer._items[0]
         drawn = sum(count for _, count in item.chunks.visible_ranges(
             np.diag([1.0, -1.0, 1.0, 1.0]) @ _clip(T)))
-        assert drawn < 0.6 * len(mesh.faces)
+        assert drawn < 0.5 * len(mesh.faces)  # culling leaves most of the wall undrawn (this view sees a corner)
         n_chunks = len(item.chunks.lo)
         item.chunks = ChunkBounds(lo=np.full((n_chunks, 3), -1e9), hi=np.full((n_chunks, 3), 1e9),
                                   n_faces=len(mesh.faces))  # every chunk in view: everything drawn

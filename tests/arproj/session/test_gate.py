@@ -49,6 +49,7 @@ def test_triangulation_recovers_points_and_flags_a_wrong_rig():
     uv_l = left.project(points)
     uv_r = right.project(transform_points(T_right_from_left, points))
     found, residual = gate.triangulate(left, right, T_right_from_left, uv_l, uv_r)
+    # exact pixels: only undistortion's iteration (to 1e-12) and float round-off remain
     assert np.abs(found - points).max() < 1e-6 and residual.max() < 1e-6
     wrong = invert(make_pose(look_at([0, 0, 0], [0.02, 0.01, 1.0], up=[0, -1, 0])[:3, :3], [0.2, 0.0, 0.0]))
     _, residual_wrong = gate.triangulate(left, right, wrong, uv_l, uv_r)
@@ -75,6 +76,8 @@ def test_scan_matching_measures_the_robots_motion(move):
     ref = _scan(start, 0.0, rng)
     cur = _scan(start + move[:2], np.radians(move[2]), rng)
     m = gate.scan_motion(ref, cur)
-    assert m.dx == pytest.approx(move[0], abs=0.0015)
-    assert m.dy == pytest.approx(move[1], abs=0.0015)
-    assert np.degrees(m.dtheta_rad) == pytest.approx(move[2], abs=0.06)
+    # 4 σ of what the scans' 1 cm range noise leaves (σ over 60 seeds: 0.9 mm along x, which only the wall
+    # ahead constrains, 0.6 mm along y, 0.02° in heading)
+    assert m.dx == pytest.approx(move[0], abs=0.004)
+    assert m.dy == pytest.approx(move[1], abs=0.0025)
+    assert np.degrees(m.dtheta_rad) == pytest.approx(move[2], abs=0.09)

@@ -53,6 +53,7 @@ def test_exposure_is_linear_before_gamma_and_clips(gl_context: object) -> None:
         b = site.photograph("camera_left", noise=False, exposure=0.04).image.astype(float)
         c = site.photograph("camera_left", noise=False, exposure=10.0).image
     valid = (a > 20) & (b < 250)
+    # 8-bit rounding of values above 20: at most ±2.5 % per pixel, the median far less
     assert np.median(b[valid] / a[valid]) == pytest.approx(2.0, rel=0.02)
     assert (c == 255).mean() > 0.99
 
@@ -83,7 +84,7 @@ def test_l_shaped_room_truth_and_laser() -> None:
     scan = site.laser_scan()
     points = transform_points(site.T_room_from_robot, scan.points_robot())
     distance = site.room.distance_to_walls(points[:, :2])
-    assert np.mean(distance < 0.04) > 0.98
+    assert np.mean(distance < 0.04) > 0.98  # 4 σ of the 1 cm range noise; all but the 0.5 % outliers, with margin
     landing = site.projector_landing()
     assert np.all(landing.wall_index[400:, 640] == 0)
 
@@ -166,7 +167,8 @@ def test_range_image_drops_depth_edges_and_grazing_surfaces() -> None:
     for r, c in zip(rows, cols, strict=True):
         assert np.all(np.isnan(depth[r, max(c - edge_px + 1, 0):c + edge_px + 1]))
     valid = np.isfinite(depth)
-    assert np.allclose(depth[valid], truth[valid], atol=1e-5)   # no noise configured: exact where present
+    # no noise configured: exact where present, up to float32 at metres (~1e-7 m) and the ray cast's round-off
+    assert np.allclose(depth[valid], truth[valid], atol=1e-5)
     assert valid.mean() > 0.8
 
 

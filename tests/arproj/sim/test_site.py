@@ -111,6 +111,7 @@ def test_laser_points_lie_on_the_walls(site: Site) -> None:
     assert len(points) > 0.95 * len(scan.ranges_m)
     inliers = distance < 4 * sigma
     assert inliers.mean() > 0.98                       # the rest: the configured outliers
+    # the noise is along the beam: off the wall it shrinks by cos(incidence), so the rms comes out below σ
     assert np.sqrt(np.mean(distance[inliers] ** 2)) == pytest.approx(sigma, rel=0.25)
 
 
@@ -119,14 +120,15 @@ def test_range_image_matches_the_room_within_noise(site: Site) -> None:
     depth, intr = site.range_image(T)
     truth = site.range_image(T).depth  # second draw: independent noise
     both = np.isfinite(depth) & np.isfinite(truth)
-    assert both.mean() > 0.8
+    assert both.mean() > 0.8  # each draw loses its 1 % random dropouts and the edge pixels
     z2 = float(np.nanmedian(depth) ** 2)
     sigma = site.scene["rangecam"]["sigma_at_1m_m"] * z2
     step = site.scene["rangecam"]["step_at_1m_m"] * z2
-    # Two independent draws differ by noise and by the depth steps (uniform quantisation: step²/12).
+    # Two independent draws differ by noise and by the depth steps (uniform quantisation: step²/12); both scale
+    # with z², taken at the median depth: the view's spread of z² makes 15 %.
     assert np.std(depth[both] - truth[both]) == pytest.approx(np.sqrt(2 * (sigma**2 + step**2 / 12)), rel=0.15)
     steps = np.diff(np.unique(depth[both & (np.abs(depth - np.nanmedian(depth)) < 0.05)]))
-    assert np.median(steps) == pytest.approx(step, rel=0.1)
+    assert np.median(steps) == pytest.approx(step, rel=0.1)  # z within 5 cm of ~2 m: z² within ±5 %
     # Exact depth of the centre pixel: the camera looks at wall 0 (y = 0) from y = 2.0.
     direction = T[:3, :3] @ intr.rays([[intr.cx, intr.cy]])[0]
     z_true = 2.0 / -direction[1]
@@ -141,18 +143,19 @@ def test_placement_aims_the_projector(gl_context: object) -> None:
         aim = wall.to_room([[1.5, 1.3]])[0]
         # The true projector axis passes (almost: angle noise) through the aim point at the asked distance.
         to_aim = aim - T[:3, 3]
-        assert np.linalg.norm(to_aim) == pytest.approx(2.2, abs=0.01)
+        assert np.linalg.norm(to_aim) == pytest.approx(2.2, abs=0.01)  # 1 cm: head errors move the projector by mm
         miss_deg = np.degrees(np.arccos(to_aim @ T[:3, 2] / np.linalg.norm(to_aim)))
-        assert miss_deg < 0.1
+        assert miss_deg < 0.1  # angle noise 0.01° σ and backlash 0.02° (scenes/default.yaml), with margin
         horizontal = -T[:3, 2].copy()
         horizontal[2] = 0
         incidence = np.degrees(np.arccos(horizontal @ wall.normal / np.linalg.norm(horizontal)))
-        assert incidence == pytest.approx(30.0, abs=0.5)
+        assert incidence == pytest.approx(30.0, abs=0.5)  # 0.5°: over 3 × the largest head bias (0.15°)
         # Commanded and true angles differ by the configured bias (plus noise and backlash).
         diff = s.head_angles_true_deg - s.head_angles_cmd_deg
-        assert np.allclose(diff, s.head_angle_bias_deg, atol=0.06)
+        assert np.allclose(diff, s.head_angle_bias_deg, atol=0.06)  # 4 σ of the 0.01° noise + 0.02° backlash
         # Localization error of the order configured.
         err = invert(s.T_room_from_robot) @ s.localized_T_room_from_robot
+        # about 5 σ of the configured localization error (0.03 m per axis, 1° heading)
         assert np.linalg.norm(err[:2, 3]) < 0.2 and rotation_angle_deg(err) < 5.0
 
 

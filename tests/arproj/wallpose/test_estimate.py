@@ -9,6 +9,10 @@ from geometry.poses import invert, rotation_angle_deg
 
 from .conftest import make_case
 
+# The issue's targets (arproj.bench.wallpose.TARGETS): normal error (°) and distance error (m) at 2 m and 4 m.
+NORMAL_2M_DEG, DISTANCE_2M_M = 0.05, 0.001
+NORMAL_4M_DEG, DISTANCE_4M_M = 0.15, 0.003
+
 
 def _assert_right(est, case) -> None:
     """The estimate is within its own 95 % bounds of the truth (and the bounds are tight)."""
@@ -20,11 +24,13 @@ def _assert_right(est, case) -> None:
 
 def test_plane_at_2m_30deg_is_exact_to_hundredths_of_a_degree(case_2m_30, photos_2m_30) -> None:
     est = estimate_plane(*photos_2m_30, case_2m_30.pattern, case_2m_30.views)
-    assert est.normal_error_deg(case_2m_30.plane.normal) < 0.05
-    assert abs(est.offset_at(case_2m_30.true_centre())) < 0.001
+    assert est.normal_error_deg(case_2m_30.plane.normal) < NORMAL_2M_DEG
+    assert abs(est.offset_at(case_2m_30.true_centre())) < DISTANCE_2M_M
     _assert_right(est, case_2m_30)
-    assert est.normal_95_deg < 0.3 and est.centre_distance_95_m < 0.004
-    assert est.corners > 0.9 * min(case_2m_30.pattern.n_corners, limits.MAX_CORNERS) and est.sigma_px < 0.2
+    # tight: 95 % bounds within twice the targets, so they can vouch for them
+    assert est.normal_95_deg < 2 * NORMAL_2M_DEG and est.centre_distance_95_m < 2 * DISTANCE_2M_M
+    # all but a tenth of the corners are inliers; their noise within the detector's subpixel bound (test_detect)
+    assert est.corners > 0.9 * min(case_2m_30.pattern.n_corners, limits.MAX_CORNERS) and est.sigma_px < 0.15
     # the projector's pose as measured is nearer the truth than the head model's
     T_true = invert(case_2m_30.views.T_robot_from_camera_left) @ case_2m_30.scene.T_robot_from_projector_true
     assert rotation_angle_deg(est.T_camera_left_from_projector, T_true) < \
@@ -34,8 +40,8 @@ def test_plane_at_2m_30deg_is_exact_to_hundredths_of_a_degree(case_2m_30, photos
 def test_plane_at_4m_60deg() -> None:
     case = make_case(4.0, 60.0, seed=2)
     est = estimate_plane(*case.photos(), case.pattern, case.views)
-    assert est.normal_error_deg(case.plane.normal) < 0.15
-    assert abs(est.offset_at(case.true_centre())) < 0.003
+    assert est.normal_error_deg(case.plane.normal) < NORMAL_4M_DEG
+    assert abs(est.offset_at(case.true_centre())) < DISTANCE_4M_M
     _assert_right(est, case)
 
 
@@ -50,7 +56,7 @@ def test_occluded_pattern_still_right(case_2m_30) -> None:
     # the corners behind the person are left out (all corners refined here, so none hides in the subsampling)
     det = detect(left, case_2m_30.pattern, case_2m_30.views.camera_left, case_2m_30.views.projector,
                  "camera_left", max_corners=None)
-    assert det.count < 0.9 * case_2m_30.pattern.n_corners
+    assert det.count < 0.9 * case_2m_30.pattern.n_corners  # the bands hide well over a tenth of the board
     assert not np.any((det.pixels[:, 0] > 300) & (det.pixels[:, 0] < 520))
 
 

@@ -24,13 +24,14 @@ def test_pattern_over_a_room_corner(gl_context) -> None:
         est = estimate_plane(left, right, pattern, views)
         assert est.corners <= (~on_side_wall).sum()
         truth = wall_truth(site)
-        # side-wall corners used at all lie at the fold, within a centimetre of the wall aimed at
+        # side-wall corners used at all lie at the fold, within a centimetre of the wall aimed at (farther ones
+        # exceed limits.RANSAC_THRESHOLD_PX at 2 m)
         used_side = est.inlier_ids[np.isin(est.inlier_ids, np.nonzero(on_side_wall)[0])]
         if len(used_side):
             off_plane = true_landing(site, pattern.corner_projector_px[used_side]) @ truth.normal + truth.distance
             assert np.all(np.abs(off_plane) < 0.01)
-        assert len(used_side) < 0.2 * on_side_wall.sum()
+        assert len(used_side) < 0.2 * on_side_wall.sum()  # only those near the fold, not the side wall
         centre = true_landing(site, pattern.centre_px[None])[0]
         assert est.normal_error_deg(truth.normal) <= est.normal_95_deg
         assert abs(est.offset_at(centre)) <= est.centre_distance_95_m
-        assert est.normal_error_deg(truth.normal) < 0.05
+        assert est.normal_error_deg(truth.normal) < 0.05  # the 2 m target (arproj.bench.wallpose.TARGETS)

@@ -33,10 +33,11 @@ def test_choose_pattern_covers_what_both_cameras_see() -> None:
     for distance in (1.0, 4.0):
         pattern = choose_pattern(views, distance, 30.0)
         w, _ = pattern.projector_size
-        assert pattern.n_corners > 150
-        assert pattern.cols * pattern.square_px > 0.5 * w
+        assert pattern.n_corners > 150  # a dense board: over ten times limits.MIN_CORNERS
+        assert pattern.cols * pattern.square_px > 0.5 * w  # over half the projector's width
         assert pattern.origin_px[0] >= 0 and pattern.origin_px[0] + pattern.cols * pattern.square_px <= w
         # squares big enough for the cameras to resolve
+        # 1e-9 px: float round-off of the product
         assert pattern.square_px * pattern.camera_px_per_projector_px >= limits.MIN_SQUARE_CAMERA_PX - 1e-9
 
 

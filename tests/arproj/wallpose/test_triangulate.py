@@ -9,6 +9,7 @@ def test_rays_through_a_point_meet_there() -> None:
     points = rng.uniform(-1, 1, (20, 3)) + np.array([0.0, 0.0, 3.0])
     origins = np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.1, 0.25, 0.0]])
     dirs = points[:, None, :] - origins[None]
+    # exact rays: float64 round-off at metres is ~1e-15 m; 1e-9 m leaves room for the solve's conditioning
     assert np.allclose(triangulate_rays(origins, dirs), points, atol=1e-9)
     valid = np.ones((20, 3), bool)
     valid[:5, 1:] = False  # one view only: no point
@@ -24,4 +25,5 @@ def test_stereo_from_normalized_coordinates() -> None:
     left = points[:, :2] / points[:, 2:]
     pr = transform_points(T_right_from_left, points)
     right = pr[:, :2] / pr[:, 2:]
+    # exact coordinates: float64 round-off, far below 1e-9 m
     assert np.allclose(triangulate_stereo(left, right, T_right_from_left), points, atol=1e-9)

@@ -62,12 +62,12 @@ def test_stereo_writes_camera_info_and_rig_with_quality(arproj: Callable[..., Do
     figures = json.loads(done.stdout)
     assert figures["pairs_used"] == 13
     assert figures["reprojection_rms_px"] < 0.3  # OpenCV's two-stage pipeline: 0.447 px on the same pairs
-    assert figures["epipolar_error_px_per_image"] < 0.145
+    assert figures["epipolar_error_px_per_image"] < 0.145  # two-stage OpenCV: 0.145 px/image (the data's README)
     rig = Rig.load(out)
     assert set(rig.intrinsics) == {"camera_left", "camera_right"}
     T = rig.pose("T_camera_right_from_camera_left")
     # The right camera sits ~3.3 squares to the right: a point at the left origin has x < 0 in the right frame.
-    assert -0.09 < T[0, 3] < -0.07
+    assert -0.09 < T[0, 3] < -0.07  # ±1 cm: 0.4 of a 2.5 cm square either side of the expected ~3.3 squares
     assert rig.quality["stereo"]["reprojection_rms_px"] == figures["reprojection_rms_px"]
     assert (out / "camera_left.yaml").read_text().startswith("image_width: 640")
     import cv2
