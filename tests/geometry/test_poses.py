@@ -14,7 +14,7 @@ def test_invert_and_chain_read_right_to_left() -> None:
     p_c = rng.normal(size=(5, 3))
     p_a = transform_points(T_a_from_b @ T_b_from_c, p_c)
     np.testing.assert_allclose(transform_points(T_a_from_b, transform_points(T_b_from_c, p_c)), p_a)
-    np.testing.assert_allclose(invert(T_a_from_b) @ T_a_from_b, np.eye(4), atol=1e-12)
+    np.testing.assert_allclose(invert(T_a_from_b) @ T_a_from_b, np.eye(4), atol=1e-12)  # float64 round-off, ~1e-16
 
 
 def test_rvec_tvec_is_T_camera_from_board_as_opencv_projects() -> None:
@@ -24,16 +24,16 @@ def test_rvec_tvec_is_T_camera_from_board_as_opencv_projects() -> None:
     uv_cv, _ = cv2.projectPoints(board, rvec, tvec, K, None)
     p_cam = transform_points(pose_from_rvec_tvec(rvec, tvec), board)
     uv = (p_cam[:, :2] / p_cam[:, 2:]) * 800 + [320, 240]
-    np.testing.assert_allclose(uv, uv_cv.reshape(-1, 2), atol=1e-9)
+    np.testing.assert_allclose(uv, uv_cv.reshape(-1, 2), atol=1e-9)  # same pinhole in float64: ~1e-13 px apart
     r2, t2 = rvec_tvec_from_pose(pose_from_rvec_tvec(rvec, tvec))
-    np.testing.assert_allclose(r2, rvec, atol=1e-12)
+    np.testing.assert_allclose(r2, rvec, atol=1e-12)  # Rodrigues there and back: round-off on 0.4 rad, ~1e-16
     np.testing.assert_allclose(t2, tvec)
 
 
 def test_look_at_puts_target_on_the_optical_axis_with_image_up_towards_up() -> None:
     T_world_from_cam = look_at([2.0, -3.0, 1.5], [0.0, 0.0, 1.0], up=[0, 0, 1])
     target_cam = transform_points(invert(T_world_from_cam), [0.0, 0.0, 1.0])
-    np.testing.assert_allclose(target_cam[:2], 0, atol=1e-12)
+    np.testing.assert_allclose(target_cam[:2], 0, atol=1e-12)  # float64 round-off on metre-scale coordinates
     assert target_cam[2] > 0
     above = transform_points(invert(T_world_from_cam), [0.0, 0.0, 2.0])
     assert above[1] < 0  # image y points down, so 'up' in the world is negative y

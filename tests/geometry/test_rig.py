@@ -26,6 +26,7 @@ def test_rig_round_trip(tmp_path: Path) -> None:
     rig.save(tmp_path)
     back = Rig.load(tmp_path)
     assert back.intrinsics == rig.intrinsics
+    # The YAML keeps floats at full precision (repr); only the inversion's round-off (~1e-16) remains.
     np.testing.assert_allclose(back.pose("T_camera_left_from_camera_right"),
                                np.linalg.inv(rig.poses["T_camera_right_from_camera_left"]), atol=1e-12)
     np.testing.assert_allclose(back.head.T_robot_from_projector([10, -5, 2]),
@@ -37,7 +38,7 @@ def test_head_model_turns_about_its_axes() -> None:
     head = HeadModel(axes=[[0, 0, 1], [0, 1, 0], [1, 0, 0]], points=np.zeros((3, 3)),
                      T_robot_from_projector_zero=np.eye(4))
     T = head.T_robot_from_projector([90, 0, 0])
-    np.testing.assert_allclose(T[:3, :3] @ [1, 0, 0], [0, 1, 0], atol=1e-12)
+    np.testing.assert_allclose(T[:3, :3] @ [1, 0, 0], [0, 1, 0], atol=1e-12)  # cos 90° in float64 is 6e-17
 
 
 def test_rig_with_a_broken_pose_is_refused(tmp_path: Path) -> None:

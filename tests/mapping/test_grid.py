@@ -52,15 +52,16 @@ def test_inverse_sensor_model_occupied_free_unknown():
     on = int(np.argmin(np.abs(xs - 0.2)))
     off = int(np.argmin(np.abs(xs - 0.35)))
     outside = int(np.argmin(np.abs(xs - 0.58)))  # 8 cm right of the last sample: never observed
+    # Decisive cells: log-odds beyond ±2.2 (p 0.9 / 0.1); the clamp at ±4 caps them at p 0.982 / 0.018.
     assert p[row, on] > 0.9
     assert p[row, off] < 0.1
     assert np.isnan(p[row, outside])  # unknown is not free
     occ = grid.occupancy_int8("ac")
-    assert occ[row, outside] == -1 and occ[row, on] > 90 and 0 <= occ[row, off] < 10
+    assert occ[row, outside] == -1 and occ[row, on] > 90 and 0 <= occ[row, off] < 10  # the same 0.9 / 0.1, in %
     lo = grid.log_odds["ac"]
     assert lo.min() >= tol.LOG_ODDS_MIN and lo.max() <= tol.LOG_ODDS_MAX  # clamped
     sig = grid.signal("ac")
-    assert abs(xs[np.nanargmax(sig[row])] - 0.2) <= 0.004
+    assert abs(xs[np.nanargmax(sig[row])] - 0.2) <= 0.004  # one cell of the 4 mm grid
 
 
 def test_nan_readings_skip_only_that_sensor():

@@ -19,11 +19,12 @@ def test_fit_plane_with_outliers():
     pts = 2.0 * n_true + a[:, None] * u + b[:, None] * v + rng.normal(0, 0.002, (400, 1)) * n_true
     outliers = rng.uniform(-1, 1, (80, 3)) + np.array([0.0, 0.0, 3.0])
     plane = fit_plane(np.vstack([pts, outliers, [[np.nan] * 3]]), toward=[0, 0, 0])
-    assert np.degrees(np.arccos(abs(plane.normal @ n_true))) < 0.2
+    # 5 σ of the least-squares tilt (σ ≈ 1.7e-4 rad = 0.01° per axis, below); a bare 3-point RANSAC plane would not do
+    assert np.degrees(np.arccos(abs(plane.normal @ n_true))) < 0.05
     assert plane.normal @ n_true < 0  # faces the origin
-    assert abs(abs(plane.d) - 2.0) < 0.002
-    assert plane.inliers[:400].mean() > 0.97 and not plane.inliers[400:].any()
-    assert plane.rms_m < 0.004
+    assert abs(abs(plane.d) - 2.0) < 5e-4  # 5 σ of the offset (2 mm / √400 = 1e-4 m)
+    assert plane.inliers[:400].mean() > 0.97 and not plane.inliers[400:].any()  # 1 cm band = 5 σ of the noise
+    assert plane.rms_m < 0.0025  # the 2 mm noise; its rms over 400 points is known to 3.5 % (1/√800)
     cov = plane.covariance(np.vstack([pts, outliers, [[np.nan] * 3]]))
     # 2 mm noise over ±1 m: tilt σ ≈ 2e-3 / (0.58 · √400) ≈ 1.7e-4 rad, offset σ ≈ 2e-3 / √400 = 1e-4 m
     assert 0.5e-4 < np.sqrt(cov[0, 0]) < 4e-4 and 0.5e-4 < np.sqrt(cov[2, 2]) < 2e-4
@@ -73,10 +74,11 @@ def test_alignment_with_point_and_line_features_beats_priors_and_matches_lsqr():
     pairs = np.column_stack([i, j])
     before = seam_error(est, true, border, pairs).mean()
     after = seam_error(x, true, border, pairs).mean()
+    # Before: the 2 cm / 1 cm / 1° pose noise (~3 cm seams); after: within 2x the 0.5 mm feature noise.
     assert before > 0.015 and after < 0.001
     A, b = g.whitened_system()
     ref = spla.lsqr(A, b, atol=1e-14, btol=1e-14, iter_lim=20000)[0].reshape(-1, 3)
-    np.testing.assert_allclose(x, ref, atol=1e-6)
+    np.testing.assert_allclose(x, ref, atol=1e-6)  # 1 µm / 1 µrad: far below the 0.5 mm noise, above lsqr's 1e-14 stop
     assert cov is not None and np.all(np.linalg.eigvalsh(cov) > 0)
     # alignment leaves the gauge to the priors: the mean pose error shrinks, it does not vanish
     assert np.abs(x[:, 2] - true[:, 2]).mean() < np.abs(est[:, 2] - true[:, 2]).mean()
@@ -115,6 +117,6 @@ def test_frames_with_too_few_laser_points_are_reported_and_skipped():
     rng = np.random.default_rng(3)
     good = np.column_stack([rng.uniform(0, 1, 200), np.full(200, 2.0), rng.uniform(0, 1, 200)])
     planes, problems = fit_frame_planes({0: good, 1: good[:4], 2: np.full((50, 3), np.nan)})
-    assert planes[0] is not None and abs(abs(planes[0].normal[1]) - 1) < 1e-9
+    assert planes[0] is not None and abs(abs(planes[0].normal[1]) - 1) < 1e-9  # exact plane y = 2: round-off only
     assert planes[1] is None and planes[2] is None
     assert len(problems) == 2 and "frame 1 laser points" in problems[0] and "too few" in problems[0]

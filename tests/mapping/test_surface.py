@@ -60,7 +60,7 @@ def test_grid_triangulation_does_not_bridge_depth_jumps(views):
     assert lengths.max() < 0.25
     # faces look at the camera
     to_cam = poses[0][:3, 3] - mesh.triangles_center
-    assert np.mean(np.einsum("ij,ij->i", mesh.face_normals, to_cam) > 0) > 0.99
+    assert np.mean(np.einsum("ij,ij->i", mesh.face_normals, to_cam) > 0) > 0.99  # all but grazing faces
 
 
 def test_views_merge_and_walls_are_recognised(views):
@@ -70,22 +70,24 @@ def test_views_merge_and_walls_are_recognised(views):
     normals = [w.plane.normal for w in walls[:2]]
     assert len(walls) >= 2
     found = sorted((abs(n @ [0, 1, 0]), abs(n @ [1, 0, 0])) for n in normals)
+    # Noise-free depth: normals within 0.8° (1 - cos = 1e-4) of the true axes, < 0.6° of cross-talk (0.01)
     assert found[0][0] < 0.01 and found[0][1] > 0.9999 and found[1][0] > 0.9999  # walls x = 2 and y = 3
     wall_a = next(w for w in walls if abs(w.plane.normal @ [0, 1, 0]) > 0.99)
     R = wall_a.T_world_from_wall[:3, :3]
+    # 1e-3: the frame's axes within 0.06° of the room's (noise-free planes)
     np.testing.assert_allclose(R[:, 2], [0, -1, 0], atol=1e-3)  # z into the room
     np.testing.assert_allclose(R[:, 1], [0, 0, 1], atol=1e-3)  # y up
     np.testing.assert_allclose(R[:, 0], [1, 0, 0], atol=1e-3)  # x right, seen from the room
     local = to_wall_frame(merged, wall_a)
-    on_wall = np.abs(local.vertices[:, 2]) < 0.01
-    assert on_wall.sum() > 1000
-    assert local.vertices[on_wall, 0].min() > -0.01 and local.vertices[on_wall, 1].min() > -0.01
+    on_wall = np.abs(local.vertices[:, 2]) < 0.01  # the plane inlier band (PLANE_INLIER_M, 1 cm)
+    assert on_wall.sum() > 1000  # about half the 2 x 4,800 range pixels land on wall A; 1,000 is a fifth of that
+    assert local.vertices[on_wall, 0].min() > -0.01 and local.vertices[on_wall, 1].min() > -0.01  # same 1 cm
 
 
 def test_flat_wall_mesh_faces_the_room():
     mesh = flat_wall_mesh(0.0, 0.0, 2.5, 2.0, step_m=0.5)
     assert mesh.vertices[:, 2].max() == 0.0 and mesh.area == pytest.approx(5.0)
-    assert np.all(mesh.face_normals[:, 2] > 0.999)
+    assert np.all(mesh.face_normals[:, 2] > 0.999)  # exactly +z up to round-off; a flipped face gives -1
 
 
 def test_range_images_file_to_wall_frame_mesh(views, tmp_path):
@@ -105,6 +107,7 @@ def test_range_images_file_to_wall_frame_mesh(views, tmp_path):
     assert len(loaded) == 2 and np.allclose(T, T_world_from_wall)
     mesh = wall_mesh_from_range_images(loaded, (0.0, 0.0, 2.5, 2.0), T)
     v = mesh.vertices
+    # cropped to the wall's bounds ± margin_m (0.05 m, wall_mesh_from_range_images' default)
     assert v[:, 0].min() >= -0.05 and v[:, 0].max() <= 2.55 and v[:, 1].min() >= -0.05
     on_wall = np.abs(v[:, 2]) < 1e-6
     assert on_wall.mean() > 0.5  # wall points lie at z = 0 exactly (noise-free images)

@@ -13,7 +13,7 @@ from scanner.wall import load_wall, shipped_walls
 
 def test_paper_figures_and_log_plot_are_written(tmp_path):
     out = plot_paper_figures(tmp_path / "paper.png")
-    assert Image.open(out).size[0] > 800
+    assert Image.open(out).size[0] > 800  # a multi-panel figure, not a thumbnail
     wall = load_wall(shipped_walls()["small_test_wall"])
     sensor, drives = SensorConfig(), DriveConfig()
     log = ScanLog.create(tmp_path / "s.db", scan_meta(wall, "small", make_planner("adaptive", wall, drives)
@@ -22,7 +22,7 @@ def test_paper_figures_and_log_plot_are_written(tmp_path):
     run_scan(wall, DirectBackend(world), robot, plan_kind="adaptive", sensor=sensor, drives=drives, log=log)
     log.close()
     picture = np.asarray(Image.open(plot_log(tmp_path / "s.db", tmp_path / "s.png")).convert("L"))
-    assert picture.std() > 10  # not a blank canvas
+    assert picture.std() > 10  # not a blank canvas: 10 of 255 grey levels
 
 
 def test_crossing_of_the_45_degree_pipe():

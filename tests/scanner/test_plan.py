@@ -31,6 +31,7 @@ def test_trapezoid_and_triangle_profiles():
         total = move_time(length, 0.05, 0.5)
         t = np.linspace(0, total, 1001)
         s = move_position(t, length, 0.05, 0.5)
+        # Float64 round-off only: positions up to 2 m (ulp 4e-16), speeds from differences of 1001 samples
         assert s[0] == 0 and s[-1] == pytest.approx(length, abs=1e-12)
         assert np.all(np.diff(s) >= -1e-15)
         assert np.max(np.diff(s) / np.diff(t)) <= 0.05 + 1e-9  # the speed limit holds
@@ -87,8 +88,8 @@ def test_adaptive_plan_finds_every_pipe_and_cable_in_a_fifth_of_the_dense_time()
     dense_time = _estimate_total(dense, dense.frames(), drives)
     world, robot = simulated_site(wall, sensor, drives, 7)
     result = run_scan(wall, DirectBackend(world), robot, plan_kind="adaptive", sensor=sensor, drives=drives)
-    assert result.scan_time_s < 0.2 * dense_time
+    assert result.scan_time_s < 0.2 * dense_time  # the bench's TARGET_TIME_RATIO
     ev = evaluate(wall, extract_segments(result.samples))
     assert ev.recall == 1.0, ev.per_object
-    assert ev.mean_error_m < 0.005
-    assert ev.false_length_m < 0.3
+    assert ev.mean_error_m < 0.005  # the bench's scan target (TARGET_ERROR_MM, 5 mm)
+    assert ev.false_length_m < 0.3  # under 2.5 % of the wall's 12.7 m of pipes and cables

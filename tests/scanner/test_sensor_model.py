@@ -39,10 +39,10 @@ def test_inductive_peaks_of_the_paper_test_plate(plate):
     assert pipe45.height < pipe90.height  # slightly lower ...
     assert pipe45.height > 0.85 * pipe90.height  # ... only slightly
     assert pipe45.width > 1.3 * pipe90.width  # ... and wider
-    assert plate_peak.height > 0.5
+    assert plate_peak.height > 0.5  # a strong peak: half of full scale, ~80 σ of the 0.006 noise
     # the cord's copper is faintly visible inductively (cross-sensitivity), far below the pipes
     cord = _peak_near(x, ind, 0.35)
-    assert cord.height < 0.5 * pipe90.height
+    assert cord.height < 0.5 * pipe90.height  # "far below": under half
 
 
 def test_ac_sensor_of_the_paper_test_plate(plate):
@@ -50,31 +50,31 @@ def test_ac_sensor_of_the_paper_test_plate(plate):
     ac = r[:, 2]
     cord = _peak_near(x, ac, 0.35)
     assert cord.position == pytest.approx(0.35, abs=0.002)  # sharp and exactly placed (no hysteresis)
-    assert cord.height > 0.7
+    assert cord.height > 0.7  # figure 6: the live cord near full scale
     ind_pipe = _peak_near(x, r[:, 0], 1.4)
-    assert cord.width < 0.8 * ind_pipe.width  # sharper than the inductive peaks
+    assert cord.width < 0.8 * ind_pipe.width  # sharper than the inductive peaks (4 mm vs 11 mm footprint σ)
     base = np.median(ac[(x > 1.6)])
     plate_level = ac[np.abs(x - 0.16) < 0.01].mean()  # metal near the power line: medium level by coupling
-    assert 0.2 < plate_level - base < 0.6 * cord.height
+    assert 0.2 < plate_level - base < 0.6 * cord.height  # medium: between the pipes' low and the cord's level
     low_08 = ac[np.abs(x - 0.8) < 0.01].mean() - base  # pipes coupled to the line: low signals
     low_14 = ac[np.abs(x - 1.4) < 0.01].mean() - base
-    assert 0.02 < low_14 < low_08 < 0.3
+    assert 0.02 < low_14 < low_08 < 0.3  # low: above 10 σ of the 0.002 AC noise, below the plate's 0.2
 
 
 def test_inductive_hysteresis_depends_on_the_direction_of_approach(plate):
     x, right = _sweep(plate, +1.0, seed=1)
     _, left = _sweep(plate, -1.0, seed=2)
     shift = _peak_near(x, right[:, 0], 1.4).position - _peak_near(x, left[:, 0], 1.4).position
-    assert shift == pytest.approx(2 * plate.config.hysteresis_m, abs=0.0015)
+    assert shift == pytest.approx(2 * plate.config.hysteresis_m, abs=0.0015)  # a quarter of the 6 mm shift
     ac_shift = _peak_near(x, right[:, 2], 0.35).position - _peak_near(x, left[:, 2], 0.35).position
-    assert abs(ac_shift) < 0.001
+    assert abs(ac_shift) < 0.001  # no AC hysteresis: a sixth of the inductive shift, two 0.5 mm samples
 
 
 def test_runs_are_reproducible_and_ac_more_so_than_inductive(plate):
     runs = [_sweep(plate, seed=s)[1] for s in range(3)]
     for ch in (0, 2):
         spread = np.std([r[:, ch] for r in runs], axis=0).mean()
-        assert 0 < spread < 0.02
+        assert 0 < spread < 0.02  # the 0.006 noise plus 2 % gain / 0.003 offset per run: 0.02 is ~3x
     ind_spread = np.std([r[:, 0] for r in runs], axis=0).mean()
     ac_spread = np.std([r[:, 2] for r in runs], axis=0).mean()
     assert ac_spread < ind_spread
@@ -95,6 +95,7 @@ def test_deeper_smaller_plastic_pipes_give_lower_wider_or_no_peaks():
         _, r = _sweep(SensorModel(wall), x=x)
         peaks[key] = detect_peaks(x, r[:, 0])
     shallow, deep, thin = peaks["shallow"][0], peaks["deep"][0], peaks["thin"][0]
+    # 2 -> 5 cm deep: depth gain (0.035 / 0.065)^3 = 0.16; footprint σ = 11 mm + 0.55 depth: 22 -> 39 mm
     assert deep.height < 0.6 * shallow.height and deep.width > 1.3 * shallow.width
     assert thin.height < shallow.height
     assert peaks["plastic"] == []  # no metal: invisible to the inductive sensor

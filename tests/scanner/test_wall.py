@@ -28,7 +28,7 @@ def test_yaml_and_json_round_trip_keep_the_fingerprint(tmp_path):
     assert a.fingerprint() == b.fingerprint() == wall.fingerprint()
     assert len(a.objects) == len(wall.objects)
     for o1, o2 in zip(a.objects, wall.objects, strict=True):
-        np.testing.assert_allclose(o1.geometry_m, o2.geometry_m, atol=1e-6)
+        np.testing.assert_allclose(o1.geometry_m, o2.geometry_m, atol=1e-6)  # wall files store 1 µm (6 decimals)
     assert random_wall(4).fingerprint() != wall.fingerprint()
 
 
