@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from mapping.evidence import Coverage
+from mapping.mapfile import MappedObject
 from mapping.objects import MapObject
 from scanner.wall import Wall, WallObject, densify, distance_to_polyline
 
@@ -145,3 +147,68 @@ def evaluate(objects: list[MapObject], wall: Wall, match_m: float = MATCH_M,
         else:
             ev.missed.append(t.id)
     return ev
+
+
+FALSE_SAFE_STEP_M = 0.005  # the true centre lines are probed every 5 mm
+
+
+def is_hazard(obj: WallObject, max_depth_m: float = MAX_DEPTH_M) -> bool:
+    """What the false-safe figure guards: metal pipes, cables (live or dead) and water-filled plastic pipes
+    within max_depth_m of the surface."""
+    if obj.depth_m > max_depth_m:
+        return False
+    return obj.kind == "cable" or (obj.kind == "pipe" and (obj.is_metal or bool(obj.water_filled)))
+
+
+@dataclass
+class FalseSafe:
+    """Per hazard (id): probed length and the length the drill check called safe, metres."""
+
+    probed_m: dict[str, float] = field(default_factory=dict)
+    safe_m: dict[str, float] = field(default_factory=dict)
+    unknown_m: dict[str, float] = field(default_factory=dict)
+
+    def merge(self, other: FalseSafe, prefix: str = "") -> None:
+        for key in other.probed_m:
+            self.probed_m[prefix + key] = other.probed_m[key]
+            self.safe_m[prefix + key] = other.safe_m[key]
+            self.unknown_m[prefix + key] = other.unknown_m[key]
+
+    @property
+    def share(self) -> float:
+        """Share of all hazards' probed length called safe (0 when nothing was probed)."""
+        total = sum(self.probed_m.values())
+        return sum(self.safe_m.values()) / total if total else 0.0
+
+    @property
+    def unknown_share(self) -> float:
+        total = sum(self.probed_m.values())
+        return sum(self.unknown_m.values()) / total if total else 0.0
+
+    def worst(self) -> tuple[str, float]:
+        """(hazard id, its share called safe) of the hazard with the largest share."""
+        if not self.probed_m:
+            return "", 0.0
+        key = max(self.probed_m, key=lambda k: self.safe_m[k] / max(self.probed_m[k], 1e-12))
+        return key, self.safe_m[key] / max(self.probed_m[key], 1e-12)
+
+
+def false_safe(objects: list[MappedObject], coverage: Coverage, wall: Wall, step_m: float = FALSE_SAFE_STEP_M,
+               max_depth_m: float = MAX_DEPTH_M) -> FalseSafe:
+    """How much of each true hazard (is_hazard) the drill check (mapping.drill, no registration error) calls
+    safe, probing its centre line every step_m: the product's promise says this is zero."""
+    from mapping.drill import SAFE, UNKNOWN, check_points
+
+    out = FalseSafe()
+    bounds = (0.0, 0.0, wall.width_m, wall.height_m)
+    for obj in wall.objects:
+        if not is_hazard(obj, max_depth_m):
+            continue
+        probes = densify(np.asarray(obj.geometry_m, dtype=np.float64), step_m)
+        verdicts = [v.verdict for v in check_points(probes, objects, coverage, bounds)]
+        n = max(len(verdicts), 1)
+        length = float(np.linalg.norm(np.diff(obj.geometry_m, axis=0), axis=1).sum()) or step_m
+        out.probed_m[obj.id] = length
+        out.safe_m[obj.id] = length * sum(v == SAFE for v in verdicts) / n
+        out.unknown_m[obj.id] = length * sum(v == UNKNOWN for v in verdicts) / n
+    return out

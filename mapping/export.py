@@ -13,11 +13,13 @@ wall.glb (what the projection session loads)
     The glTF scene's `extras` carry {"frame": "wall", "units": "m", "bounds_m": [x_min, y_min, x_max, y_max]}.
 
 objects.json
-    {"frame": "wall", "units": "m", "objects": [{"class": "power_line" | "metal_pipe" | "metal" | "wood" |
-     "cavity" | "fastener", "kind": "line" | "point" | "outline", "points_m": [[x, y], …], "width_m": w,
-     "confidence": 0…1, "position_sigma_m": σ}, …], "scanned_regions_m": [[[x, y], …], …]}
-    — lines are polylines, points one point, outlines closed rings; scanned_regions_m are polygons of the
-    scanned area (the rest of the wall is unknown, not free).
+    The mapped objects (format arproj-objects/2, read by mapping.mapfile): class, shape, polyline, width,
+    confidence, position σ, depth and its σ, and per segment whether it was measured or inferred;
+    scanned_regions_m: the area both safety channels covered, as polygons with holes (for drawing only).
+
+coverage.npz
+    The evidence layers (mapping.evidence): per channel, the cells its footprint covered and where it
+    responded. The drill check (`arproj drill`, the projection session) judges by these, never by outlines.
 
 map.png: the classified map with legend and scale bar. signals.png: raw inductive and AC readings of the
 samples along one horizontal line, one curve per pass (as the paper's figures 5 and 6). objects.dxf: one
@@ -27,66 +29,39 @@ layer per class; LWPOLYLINE for lines and outlines, CIRCLE for fasteners, in mil
 from __future__ import annotations
 
 import itertools
-import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from mapping import mapfile
+from mapping.evidence import FILE_NAME as COVERAGE_FILE
+from mapping.evidence import SAFETY_CHANNELS, regions
 from mapping.fusion import CLASSES, class_map
-from mapping.objects import MapObject
 from mapping.pipeline import MapResult, ScanData
 from mapping.surface import flat_wall_mesh
 from mapping.texture import CLASS_COLOURS, bake_texture, textured_wall_mesh
 
-POSITION_SIGMA_M = 0.002  # 1σ position uncertainty of mapped objects (bench mapping: mean error ≈ 1 mm)
+
+def _looked(result: MapResult) -> NDArray[np.bool_]:
+    """Cells both safety channels covered (what may ever be called free), from the coverage layer."""
+    if result.coverage is None:
+        raise ValueError("the map result has no coverage layer")
+    return result.coverage.covered_by_all(SAFETY_CHANNELS)
 
 
-def objects_document(objects: list[MapObject], scanned: list[NDArray[np.float64]] | None = None) -> dict:
-    doc: dict = {"frame": "wall", "units": "m", "objects": []}
-    for o in objects:
-        item = o.to_json()
-        item["position_sigma_m"] = POSITION_SIGMA_M
-        doc["objects"].append(item)
-    if scanned is not None:
-        doc["scanned_regions_m"] = [[[round(float(x), 4), round(float(y), 4)] for x, y in p] for p in scanned]
-    return doc
-
-
-def scanned_regions(result: MapResult, simplify_m: float = 0.005) -> list[NDArray[np.float64]]:
-    """Polygons (k, 2) wall metres around the scanned cells (outer boundaries; gaps inside are holes that
-    show as separate unscanned areas in the texture's alpha)."""
-    import cv2
-
-    info = result.grid.info
-    known = np.zeros(info.shape, np.uint8)
-    for s in result.grid.sensors:
-        known |= result.grid.known(s).astype(np.uint8)
-    contours, _ = cv2.findContours(known, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    out = []
-    for c in contours:
-        c = cv2.approxPolyDP(c, simplify_m / info.resolution, True).reshape(-1, 2).astype(np.float64)
-        if len(c) >= 3:
-            out.append(info.to_wall(c))
-    return out
-
-
-def write_objects_json(objects: list[MapObject], path: str | Path,
-                       scanned: list[NDArray[np.float64]] | None = None) -> Path:
-    path = Path(path)
-    path.write_text(json.dumps(objects_document(objects, scanned), indent=1) + "\n")
-    return path
+def scanned_regions(result: MapResult) -> list[dict]:
+    """The area both safety channels covered, as polygons with holes in wall metres (for drawing)."""
+    return regions(_looked(result), result.grid.info)
 
 
 def wall_texture(result: MapResult, px_per_m: float = 500.0) -> NDArray[np.uint8]:
     """RGBA texture (H, W, 4) of the map over result.bounds."""
     idx, prob = class_map(result.grid)
-    known = np.zeros(result.grid.info.shape, bool)
-    for s in result.grid.sensors:
-        known |= result.grid.known(s)
-    return bake_texture(result.grid.info, idx, prob, list(CLASSES), known, result.objects, result.bounds,
-                        px_per_m)
+    return bake_texture(result.grid.info, idx, prob, list(CLASSES), _looked(result), result.mapped_objects(),
+                        result.bounds, px_per_m)
 
 
 def write_wall_glb(result: MapResult, path: str | Path, mesh: trimesh.Trimesh | None = None,
@@ -128,18 +103,26 @@ def write_map_png(result: MapResult, path: str | Path, title: str = "") -> Path:
     layer = "inductive" if "inductive" in grid.models else grid.sensors[0]
     sig = grid.signal(layer)
     cmap = plt.get_cmap("Greys").with_extremes(bad=(1.0, 0.85, 0.85))  # unknown: pale red
+    sig = np.where(_looked(result), sig, np.nan)  # only what both safety channels covered counts as looked at
     ax.imshow(np.ma.masked_invalid(sig), origin="lower", extent=grid.info.extent, cmap=cmap, alpha=0.8)
     used = set()
-    for o in result.objects:
+    any_inferred = False
+    for o in result.mapped_objects():
         colour = np.array(CLASS_COLOURS.get(o.cls, CLASS_COLOURS["unknown"])) / 255.0
         used.add(o.cls)
-        p = o.points_m
-        if o.kind == "point":
+        if o.shape == "point":
+            p = o.points_m
             ax.plot(p[:, 0], p[:, 1], "o", color=colour, ms=6, mec="black", mew=0.5)
-        else:
-            ax.plot(p[:, 0], p[:, 1], "-", color=colour, lw=2.5 if o.kind == "line" else 1.5)
+            continue
+        for measured, style in ((True, "-"), (False, "--")):
+            for p in o.parts(measured):
+                p = np.vstack([p, p[:1]]) if o.is_outline else p
+                ax.plot(p[:, 0], p[:, 1], style, color=colour, lw=2.5 if o.shape == "line" else 1.5)
+                any_inferred |= not measured
     handles = [Line2D([0], [0], color=np.array(CLASS_COLOURS[c]) / 255.0, lw=3, label=c.replace("_", " "))
                for c in CLASSES if c in used]
+    if any_inferred:
+        handles.append(Line2D([0], [0], color="black", lw=2, ls="--", label="inferred, not measured"))
     handles.append(Line2D([0], [0], color=(1.0, 0.85, 0.85), lw=8, label="not scanned"))
     ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.85)
     _scale_bar(ax, result.bounds)
@@ -232,40 +215,63 @@ def write_signal_plot(data: ScanData, result: MapResult, path: str | Path, y_m: 
     return path
 
 
-def write_dxf(objects: list[MapObject], path: str | Path) -> Path:
-    """objects.dxf: a layer per class, millimetres, wall frame (x right, y up)."""
+def write_dxf(objects: list[mapfile.MappedObject], path: str | Path) -> Path:
+    """objects.dxf: a layer per class (inferred stretches on CLASS_INFERRED, dashed), millimetres, wall frame
+    (x right, y up); each object's depth in a text label beside it."""
     import ezdxf
 
     path = Path(path)
-    doc = ezdxf.new(units=ezdxf.units.MM)
+    doc = ezdxf.new(units=ezdxf.units.MM, setup=True)
     msp = doc.modelspace()
     aci = {"power_line": 1, "metal_pipe": 5, "metal": 6, "wood": 30, "cavity": 4, "fastener": 2}
     for cls in CLASSES:
         doc.layers.add(cls.upper(), color=aci.get(cls, 7))
+        doc.layers.add(f"{cls.upper()}_INFERRED", color=aci.get(cls, 7), linetype="DASHED")
+    doc.layers.add("LABELS", color=7)
     for o in objects:
         layer = o.cls.upper() if o.cls in CLASSES else "0"
-        pts = [(float(x) * 1000.0, float(y) * 1000.0) for x, y in o.points_m]
-        if o.kind == "point":
+        if o.shape == "point":
+            pts = [(float(x) * 1000.0, float(y) * 1000.0) for x, y in o.points_m]
             msp.add_circle(pts[0], radius=max(o.width_m, 0.004) * 500.0, dxfattribs={"layer": layer})
-        else:
-            closed = o.kind == "outline"
-            poly = msp.add_lwpolyline(pts[:-1] if closed else pts, dxfattribs={"layer": layer})
-            poly.closed = closed
-            if o.kind == "line":
-                poly.dxf.const_width = o.width_m * 1000.0
+        for measured in (True, False):
+            for part in ([] if o.shape == "point" else o.parts(measured)):
+                pts = [(float(x) * 1000.0, float(y) * 1000.0) for x, y in part]
+                closed = o.is_outline
+                name = layer if measured or layer == "0" else f"{layer}_INFERRED"
+                poly = msp.add_lwpolyline(pts[:-1] if closed and len(pts) > 3 else pts, dxfattribs={"layer": name})
+                poly.closed = closed
+                if o.shape == "line":
+                    poly.dxf.const_width = o.width_m * 1000.0
+        if o.depth_m is not None:
+            sigma = "" if o.depth_sigma_m is None else f" ±{o.depth_sigma_m * 1000:.0f}"
+            anchor = o.points_m[len(o.points_m) // 2] * 1000.0
+            msp.add_text(f"{o.cls.replace('_', ' ')} {o.depth_m * 1000:.0f}{sigma} mm deep", height=12.0,
+                         dxfattribs={"layer": "LABELS"}).set_placement((float(anchor[0]) + 15.0,
+                                                                        float(anchor[1]) + 15.0))
     doc.saveas(path)
     return path
+
+
+def export_steps(data: ScanData, result: MapResult, out_dir: str | Path, mesh: trimesh.Trimesh | None = None,
+                 title: str = "", signal_y: float | None = None) -> list[tuple[str, Callable[[], Path]]]:
+    """(file name, writer) for every export into out_dir, in the order `arproj map` writes them."""
+    out = Path(out_dir)
+    if result.coverage is None:
+        raise ValueError("the map result has no coverage layer")
+    coverage = result.coverage
+    return [
+        ("wall.glb", lambda: write_wall_glb(result, out / "wall.glb", mesh)),
+        (mapfile.FILE_NAME, lambda: mapfile.write_objects(out / mapfile.FILE_NAME, result.mapped_objects(),
+                                                          scanned_regions(result))),
+        (COVERAGE_FILE, lambda: coverage.save(out / COVERAGE_FILE)),
+        ("map.png", lambda: write_map_png(result, out / "map.png", title=title)),
+        ("signals.png", lambda: write_signal_plot(data, result, out / "signals.png", signal_y)),
+        ("objects.dxf", lambda: write_dxf(result.mapped_objects(), out / "objects.dxf")),
+    ]
 
 
 def export_all(data: ScanData, result: MapResult, out_dir: str | Path,
                mesh: trimesh.Trimesh | None = None) -> dict[str, Path]:
     """Every export into out_dir; returns {name: path}."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    return {
-        "wall.glb": write_wall_glb(result, out / "wall.glb", mesh),
-        "objects.json": write_objects_json(result.objects, out / "objects.json", scanned_regions(result)),
-        "map.png": write_map_png(result, out / "map.png"),
-        "signals.png": write_signal_plot(data, result, out / "signals.png"),
-        "objects.dxf": write_dxf(result.objects, out / "objects.dxf"),
-    }
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    return {name: write() for name, write in export_steps(data, result, out_dir, mesh)}

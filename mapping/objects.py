@@ -38,6 +38,9 @@ class MapObject:
     cls: str = "unknown"
     confidence: float = 0.0
     features: dict[str, float] = field(default_factory=dict)
+    # Depth of the object behind the surface and its 1σ, metres (mapping.depth); None where no channel tells.
+    depth_m: float | None = None
+    depth_sigma_m: float | None = None
 
     def length_m(self) -> float:
         p = self.points_m

@@ -18,8 +18,10 @@ from numpy.typing import NDArray
 
 from geometry.errors import InputError
 from mapping import tolerances as tol
+from mapping.evidence import Coverage, coverage_radii, mapped_objects, sample_noise
 from mapping.fusion import Fuser, FusionParams, InductiveModel
 from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid
+from mapping.mapfile import MappedObject
 from mapping.objects import (
     MapObject,
     drop_points_on_lines,
@@ -110,6 +112,11 @@ class MapResult:
     sample_xy: NDArray[np.float64]  # (n, 2) positions the map used, metres
     truth_xy: NDArray[np.float64] | None = None  # (n, 2) simulation truth, if logged
     notes: list[str] = field(default_factory=list)  # what was done (not problems)
+    coverage: Coverage | None = None  # what each channel's footprint covered and where it responded
+
+    def mapped_objects(self) -> list[MappedObject]:
+        """The objects as objects.json holds them: measured and inferred stretches, depth, position σ."""
+        return mapped_objects(self.objects, self.coverage, tol.POSITION_SIGMA_M)
 
 
 @dataclass(frozen=True)
@@ -242,18 +249,23 @@ def build_map(data: ScanData, settings: MapSettings | None = None) -> MapResult:
         raise InputError(f"{data.source}: every reading is NaN; nothing to map")
     grid = WallGrid(info, models)
     shift = float((data.meta.get("sensor") or {}).get("hysteresis_m", 0.0) or 0.0)
+    looked: dict[str, NDArray[np.float64]] = {}
     for s in models:
         pos = hysteresis_corrected(xy, data, shift) if s == "inductive" else xy
         grid.add_samples(pos, {s: readings[s]})
+        looked[s] = pos[np.isfinite(readings[s]) & np.all(np.isfinite(pos), axis=1)]
     coverage = float(np.mean(grid.known(next(iter(models)))))
     sparse = coverage < SPARSE_COVERAGE
     objects = extract_objects(grid, settings, data.meta.get("sensor"), data if sparse else None, xy, shift)
     if sparse:
         notes.append(f"sparse scan ({coverage:.0%} of the wall covered): lines linked from the passes' peaks")
+    pass_ids = data.samples.get("pass_id", np.zeros(data.n_samples, np.int64))
+    noise = {s: sample_noise(readings[s], pass_ids, s) for s in models}
+    evidence = Coverage.from_grid(grid, looked, objects, coverage_radii(data.meta.get("sensor")), bounds, noise)
     truth = None
     if "true_x_m" in data.samples and np.isfinite(data.samples["true_x_m"]).any():
         truth = np.column_stack([data.samples["true_x_m"], data.samples["true_y_m"]])
-    return MapResult(grid, objects, bounds, poses, frame_ids, warnings, xy, truth, notes)
+    return MapResult(grid, objects, bounds, poses, frame_ids, warnings, xy, truth, notes, evidence)
 
 
 def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_meta: dict | None = None,

@@ -5,9 +5,10 @@ the highest y (as a person sees the wall), pixel (row, col) centre at
 x = x_min + (col + 0.5)/px_per_m, y = y_max − (row + 0.5)/px_per_m. Texture coordinates follow trimesh/OpenGL:
 u = (x − x_min)/(x_max − x_min), v = (y − y_min)/(y_max − y_min), v = 0 at the image's bottom row.
 
-Colours: one per class (CLASS_COLOURS), alpha from the class probability. Alpha also marks coverage, as the
-projection session reads it: alpha 0 exactly where the wall was NOT scanned (unknown), a faint neutral grey
-(alpha SCANNED_ALPHA) where it was scanned and nothing was found.
+Colours: one per class (CLASS_COLOURS), alpha from the class probability. Alpha also marks coverage: alpha 0
+exactly where the channels that rule objects out (mapping.evidence.SAFETY_CHANNELS) did not both cover the
+wall (unknown), a faint neutral grey (alpha SCANNED_ALPHA) where they did and nothing was found. Measured
+stretches of objects are drawn solid, inferred ones (joined across unmeasured ground) dashed.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from numpy.typing import NDArray
 from PIL import Image
 
 from mapping.grid import GridInfo
-from mapping.objects import MapObject
+from mapping.mapfile import MappedObject
 
 CLASS_COLOURS: dict[str, tuple[int, int, int]] = {
     "power_line": (230, 30, 30),
@@ -32,10 +33,29 @@ CLASS_COLOURS: dict[str, tuple[int, int, int]] = {
 }
 SCANNED_ALPHA = 24  # scanned, nothing found: faint grey; alpha 0 is reserved for "not scanned"
 SCANNED_GREY = (200, 200, 200)
+DASH_M = 0.02  # inferred stretches: 2 cm dashes with 2 cm gaps
+
+
+def dashed_polyline(img: NDArray[np.uint8], pts: NDArray[np.float64], colour: tuple[int, ...], thickness: int,
+                    dash_px: float) -> None:
+    """Draw the polyline pts (k, 2) pixel coordinates as dashes of dash_px with equal gaps (in place)."""
+    seg = np.diff(pts, axis=0)
+    lengths = np.linalg.norm(seg, axis=1)
+    s_start = np.concatenate([[0.0], np.cumsum(lengths)])
+    total = float(s_start[-1])
+    s = 0.0
+    while s < total:
+        a, b = s, min(s + dash_px, total)
+        piece = [np.interp(a, s_start, pts[:, 0]), np.interp(a, s_start, pts[:, 1])]
+        inner = [pts[k + 1] for k in range(len(seg)) if a < s_start[k + 1] < b]
+        end = [np.interp(b, s_start, pts[:, 0]), np.interp(b, s_start, pts[:, 1])]
+        poly = np.rint(np.array([piece, *inner, end]) * 4).astype(np.int32)  # 2 fractional bits for cv2
+        cv2.polylines(img, [poly], False, colour, thickness, cv2.LINE_AA, shift=2)
+        s += 2 * dash_px
 
 
 def bake_texture(info: GridInfo, class_index: NDArray[np.int16], class_prob: NDArray[np.float64],
-                 classes: list[str], known: NDArray[np.bool_], objects: list[MapObject],
+                 classes: list[str], known: NDArray[np.bool_], objects: list[MappedObject],
                  bounds: tuple[float, float, float, float], px_per_m: float = 500.0) -> NDArray[np.uint8]:
     """RGBA image (H, W, 4) of the map over bounds (x_min, y_min, x_max, y_max) metres.
 
@@ -63,17 +83,22 @@ def bake_texture(info: GridInfo, class_index: NDArray[np.int16], class_prob: NDA
     img[hit, :3] = palette[idx[hit]]
     img[hit, 3] = np.clip(60 + 120 * np.nan_to_num(prob[hit]), 0, 255).astype(np.uint8)
 
+    def to_px_float(p: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.column_stack([(p[:, 0] - x0) * px_per_m - 0.5, (y1 - p[:, 1]) * px_per_m - 0.5])
+
     def to_px(p: NDArray[np.float64]) -> NDArray[np.int32]:
-        return np.rint(np.column_stack([(p[:, 0] - x0) * px_per_m - 0.5, (y1 - p[:, 1]) * px_per_m - 0.5])
-                       * 4).astype(np.int32)  # 2 fractional bits for cv2's shift
+        return np.rint(to_px_float(p) * 4).astype(np.int32)  # 2 fractional bits for cv2's shift
 
     for obj in objects:
         colour = (*CLASS_COLOURS.get(obj.cls, CLASS_COLOURS["unknown"]), 255)
         pts = to_px(obj.points_m)
         thick = max(2, round(max(obj.width_m, 0.008) * px_per_m))
-        if obj.kind == "line":
-            cv2.polylines(img, [pts], False, colour, thick, cv2.LINE_AA, shift=2)
-        elif obj.kind == "point":
+        if obj.shape == "line":
+            for part in obj.parts(measured=True):
+                cv2.polylines(img, [to_px(part)], False, colour, thick, cv2.LINE_AA, shift=2)
+            for part in obj.parts(measured=False):
+                dashed_polyline(img, to_px_float(part), colour, thick, DASH_M * px_per_m)
+        elif obj.shape == "point":
             cv2.circle(img, tuple(int(v) for v in pts[0]), max(3, round(0.006 * px_per_m)) * 4, colour, -1,
                        cv2.LINE_AA, shift=2)
         else:

@@ -7,6 +7,8 @@ DEFAULT_RESOLUTION_M = 0.004  # map cell size; finer than the 1 cm raster so sub
 SIGNAL_SPLAT_SIGMA_M = 0.004  # Gaussian footprint with which a sample's reading is spread onto the grid
 KNOWN_WEIGHT = 0.05  # footprint weight a cell needs to count as observed (≈ a sample within 2σ); else unknown
 
+POSITION_SIGMA_M = 0.002  # 1σ position uncertainty of mapped objects (bench mapping: mean error ≈ 1 mm)
+
 # Log-odds clamping (as in ROS/octomap: keeps a cell able to change its mind)
 LOG_ODDS_MIN = -4.0
 LOG_ODDS_MAX = 4.0

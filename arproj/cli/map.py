@@ -13,8 +13,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     @app.command("map")
     def map_command(
         log: Path = typer.Argument(..., help="Scan log (SQLite) written by `arproj scan --log LOG`."),
-        out: Path = typer.Option(Path("map"), "--out", help="Folder for wall.glb, objects.json, map.png, "
-                                 "signals.png and objects.dxf."),
+        out: Path = typer.Option(Path("map"), "--out", help="Folder for wall.glb, objects.json, coverage.npz, "
+                                 "map.png, signals.png and objects.dxf."),
         resolution_mm: float = typer.Option(4.0, "--resolution", help="Map cell size in millimetres."),
         no_stitch: bool = typer.Option(False, "--no-stitch", help="Use the logged sample positions as they "
                                        "are (skip frame alignment)."),
@@ -35,7 +35,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         if not resolution_mm > 0:
             raise InputError(f"--resolution {resolution_mm}: the cell size must be a positive number of mm")
         with progress_bar() as bar:
-            task = bar.add_task("mapping", total=7)
+            task = bar.add_task("mapping", total=8)
             bar.update(task, description="reading the log")
             data = load_scan(log)
             bar.advance(task)
@@ -50,14 +50,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                 bar.update(task, description="meshing the range images")
                 views, T_world_from_wall = load_range_images(str(range_images))
                 mesh = wall_mesh_from_range_images(views, result.bounds, T_world_from_wall)
-            steps = [
-                ("wall.glb", lambda: export.write_wall_glb(result, out / "wall.glb", mesh)),
-                ("objects.json", lambda: export.write_objects_json(result.objects, out / "objects.json",
-                                                                   export.scanned_regions(result))),
-                ("map.png", lambda: export.write_map_png(result, out / "map.png", title=f"In-wall map of {log.name}")),
-                ("signals.png", lambda: export.write_signal_plot(data, result, out / "signals.png", signal_y)),
-                ("objects.dxf", lambda: export.write_dxf(result.objects, out / "objects.dxf")),
-            ]
+            steps = export.export_steps(data, result, out, mesh, title=f"In-wall map of {log.name}",
+                                        signal_y=signal_y)
             written = []
             for name, step in steps:
                 bar.update(task, description=f"writing {name}")

@@ -1,5 +1,5 @@
-"""What is drawn on the wall: classes in distinct colours with a legend, safety bands, DIN 18015-3 zones and
-the drill-point check.
+"""What is drawn on the wall: classes in distinct colours with a legend, safety bands (inferred stretches
+dashed), DIN 18015-3 zones and the drill-point check (mapping.drill decides; this draws it).
 
 Everything except the legend is rasterised in WALL coordinates into the texture of the projected mesh (so it
 is pre-warped by the renderer with the projector's exact intrinsics, pose and distortion); the legend and
@@ -19,7 +19,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from arproj.session import tolerances as tol
-from arproj.session.wallmap import MapObject, WallMap
+from arproj.session.wallmap import WallMap
+from mapping import drill
+from mapping.drill import DrillVerdict, band_half_width_m, distance_to_object_m, safety_margin_m
+from mapping.mapfile import MappedObject
+from mapping.texture import dashed_polyline
+
+__all__ = ["DrillVerdict", "band_half_width_m", "check_drill_point", "distance_to_object_m", "draw_map",
+           "safety_margin_m"]
 
 # Legend entries: (label, RGB colour, mapping classes drawn in that colour). Colours are bright (a projector
 # adds light; dark colours vanish on a lit wall) and differ in hue and lightness (Okabe–Ito inspired), so
@@ -35,20 +42,9 @@ CLASS_COLOR: dict[str, tuple[int, int, int]] = {c: colour for _, colour, classes
 # Drawing order: outlines under lines, power lines on top (the most dangerous object is never hidden).
 DRAW_ORDER = ("cavity", "wood", "fastener", "metal", "metal_pipe", "power_line")
 
-VERDICT_SAFE = "safe"
-VERDICT_KEEP_AWAY = "keep away"
-VERDICT_UNKNOWN = "unknown: not scanned"
+VERDICT_SAFE, VERDICT_KEEP_AWAY, VERDICT_UNKNOWN = drill.SAFE, drill.KEEP_AWAY, drill.UNKNOWN
 VERDICT_COLOR = {VERDICT_SAFE: (60, 255, 60), VERDICT_KEEP_AWAY: (255, 40, 40), VERDICT_UNKNOWN: (255, 200, 0)}
-
-
-def safety_margin_m(obj: MapObject, registration_sigma_m: float) -> float:
-    """Margin beyond the object's own half-width, metres."""
-    return tol.BASE_SAFETY_MARGIN_M + tol.Z95 * float(np.hypot(obj.sigma_m, registration_sigma_m))
-
-
-def band_half_width_m(obj: MapObject, registration_sigma_m: float) -> float:
-    """Half-width of the drawn band: the object's half-width plus its safety margin, metres."""
-    return 0.5 * obj.width_m + safety_margin_m(obj, registration_sigma_m)
+INFERRED_DASH_M = 0.03  # inferred stretches: 3 cm dashes, 3 cm gaps
 
 
 # -- DIN 18015-3 --------------------------------------------------------------------------------------------
@@ -117,16 +113,20 @@ def empty_raster(extent: tuple[float, float, float, float], px_per_m: float = to
 
 
 def scanned_mask(wall_map: WallMap, raster: WallRaster) -> NDArray[np.bool_]:
-    """(h, w) True where the wall was scanned: objects.json's polygons, else the map texture's alpha, else all."""
+    """(h, w) True where the channels that rule objects out both covered the wall (the coverage layer);
+    nothing without one."""
     h, w = raster.image.shape[:2]
-    if wall_map.scanned:
-        mask = np.zeros((h, w), dtype=np.uint8)
-        polys = [np.round(raster.to_px(p) * 16).astype(np.int32) for p in wall_map.scanned]
-        cv2.fillPoly(mask, polys, 1, lineType=cv2.LINE_8, shift=4)
-        return mask.astype(bool)
-    if wall_map.texture is not None and wall_map.uv_from_xy is not None:
-        return _sample_map_texture(wall_map, raster)[..., 3] > 0
-    return np.ones((h, w), dtype=bool)
+    if wall_map.coverage is None:
+        return np.zeros((h, w), dtype=bool)
+    cov = wall_map.coverage
+    looked = cov.covered_by_all()
+    cols, rows = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    x = raster.x0 + (cols + 0.5) / raster.px_per_m
+    y = raster.y1 - (rows + 0.5) / raster.px_per_m
+    r, c, inside = cov.info.cell_of(np.column_stack([x.ravel(), y.ravel()]))
+    out = np.zeros(h * w, dtype=bool)
+    out[inside] = looked[r[inside], c[inside]]
+    return out.reshape(h, w)
 
 
 def _sample_map_texture(wall_map: WallMap, raster: WallRaster) -> NDArray[np.uint8]:
@@ -180,7 +180,7 @@ def draw_map(wall_map: WallMap, registration_sigma_m: float, drill_xy: NDArray[n
         zone = zone_mask.astype(bool) & unscanned & _hatch((h, w), max(4, int(0.04 * s)))
         _blend(img, np.full((h, w, 3), 255, np.uint8), zone, tol.DIN_ZONE_OPACITY)
     for kind in DRAW_ORDER:
-        for obj in (o for o in wall_map.objects if o.kind == kind):
+        for obj in (o for o in wall_map.objects if o.cls == kind):
             _draw_object(img, raster, obj, registration_sigma_m)
     if drill_xy is not None:
         check = check_drill_point(wall_map, drill_xy, registration_sigma_m)
@@ -203,12 +203,14 @@ def draw_map(wall_map: WallMap, registration_sigma_m: float, drill_xy: NDArray[n
     return raster
 
 
-def _distance_field(raster: WallRaster, obj: MapObject, reach_m: float) -> NDArray[np.float32]:
+def _distance_field(raster: WallRaster, obj: MappedObject, reach_m: float,
+                    pts: NDArray[np.float64] | None = None) -> NDArray[np.float32]:
     """Distance (h, w) in metres from every texel centre to the object's centre line, point or outline
-    edge (inf beyond reach_m of it): exact, so band edges are where the safety margin says, to half a texel."""
+    edge (inf beyond reach_m of it): exact, so band edges are where the safety margin says, to half a texel.
+    pts: one part of the object (a measured or inferred stretch), default the whole."""
     h, w = raster.image.shape[:2]
     field = np.full((h, w), np.inf, dtype=np.float32)
-    pts = obj.points_m
+    pts = obj.points_m if pts is None else pts
     segments = np.concatenate([pts, pts[:1]]) if obj.is_outline else pts
     pairs = [(segments[i], segments[i + 1]) for i in range(len(segments) - 1)] or [(pts[0], pts[0])]
     s = raster.px_per_m
@@ -235,14 +237,14 @@ def _paint(img: NDArray[np.uint8], mask: NDArray[np.bool_], colour: tuple[int, .
     img[mask] = (*colour, 255)
 
 
-def _draw_object(img: NDArray[np.uint8], raster: WallRaster, obj: MapObject, registration_sigma_m: float
+def _draw_object(img: NDArray[np.uint8], raster: WallRaster, obj: MappedObject, registration_sigma_m: float
                  ) -> None:
     s = raster.px_per_m
-    colour = CLASS_COLOR[obj.kind]
+    colour = CLASS_COLOR[obj.cls]
     margin_colour = tuple(int(0.5 * c) for c in colour)
     band = band_half_width_m(obj, registration_sigma_m)
-    d = _distance_field(raster, obj, band + 2.0 / s)
     if obj.is_outline:
+        d = _distance_field(raster, obj, band + 2.0 / s)
         _paint(img, d <= band - 0.5 * obj.width_m, margin_colour)
         inside = np.zeros(img.shape[:2], dtype=np.uint8)
         pts = np.round(raster.to_px(obj.points_m) * 16).astype(np.int32).reshape(-1, 1, 2)
@@ -251,83 +253,31 @@ def _draw_object(img: NDArray[np.uint8], raster: WallRaster, obj: MapObject, reg
         _blend(img, np.full((*inside.shape, 3), colour, np.uint8), hatch, 0.5)
         _paint(img, d <= max(0.5 * obj.width_m, 2.0 / s), colour)
         return
-    _paint(img, d <= band, margin_colour)
-    if obj.kind == "power_line":  # hatch the margin too: "live" must not rely on colour alone
-        _paint(img, (d <= band) & _hatch(d.shape, max(6, int(0.02 * s))), tuple(int(0.8 * c) for c in colour))
-    _paint(img, d <= max(0.5 * obj.width_m, 1.0 / s), colour)
+    for part in obj.parts(measured=True):
+        d = _distance_field(raster, obj, band + 2.0 / s, part)
+        _paint(img, d <= band, margin_colour)
+        if obj.cls == "power_line":  # hatch the margin too: "live" must not rely on colour alone
+            _paint(img, (d <= band) & _hatch(d.shape, max(6, int(0.02 * s))), tuple(int(0.8 * c) for c in colour))
+        _paint(img, d <= max(0.5 * obj.width_m, 1.0 / s), colour)
+    for part in obj.parts(measured=False):
+        # Inferred, not measured: the band's outline and a dashed centre line, so it never reads as a scan.
+        d = _distance_field(raster, obj, band + 2.0 / s, part)
+        edge = (d <= band) & (d > band - max(2.0 / s, 0.003))
+        _paint(img, edge, margin_colour)
+        thick = max(2, round(max(obj.width_m, 0.004) * s))
+        dashed_polyline(img, raster.to_px(part), (*colour, 255), thick, INFERRED_DASH_M * s)
 
 
 # -- drill-point check ----------------------------------------------------------------------------------------
-@dataclass
-class DrillCheck:
-    """verdict: safe / keep away / unknown: not scanned; distance_m: from the point to the nearest object's
-    edge (0 inside it; inf when the map has none); clearance_m: distance minus that object's safety margin."""
-
-    verdict: str
-    distance_m: float
-    clearance_m: float
-    nearest: MapObject | None
-    scanned: bool
-
-    @property
-    def message(self) -> str:
-        if self.nearest is None:
-            where = "no mapped object"
-        else:
-            where = f"{self.distance_m * 1000:.0f} mm from the nearest {self.nearest.kind.replace('_', ' ')}"
-        return f"{self.verdict} ({where})"
-
-
-def distance_to_object_m(obj: MapObject, xy: NDArray[np.float64]) -> float:
-    """Distance (metres) from wall point xy (2,) to the object's edge; 0 on or inside it."""
-    p = np.asarray(xy, dtype=np.float64).reshape(2)
-    pts = obj.points_m
-    if obj.is_outline:
-        inside = cv2.pointPolygonTest(pts.astype(np.float32).reshape(-1, 1, 2), (float(p[0]), float(p[1])), True)
-        return max(0.0, -float(inside))
-    if len(pts) == 1:
-        centre_distance = float(np.linalg.norm(p - pts[0]))
-    else:
-        a, b = pts[:-1], pts[1:]
-        ab = b - a
-        t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18), 0, 1)
-        centre_distance = float(np.min(np.linalg.norm(a + t[:, None] * ab - p, axis=1)))
-    return max(0.0, centre_distance - 0.5 * obj.width_m)
-
-
-def point_scanned(wall_map: WallMap, xy: NDArray[np.float64]) -> bool:
-    p = np.asarray(xy, dtype=np.float64).reshape(2)
-    if wall_map.scanned:
-        return any(cv2.pointPolygonTest(poly.astype(np.float32).reshape(-1, 1, 2), (float(p[0]), float(p[1])),
-                                        False) >= 0 for poly in wall_map.scanned)
-    if wall_map.texture is not None and wall_map.uv_from_xy is not None:
-        u, v = wall_map.uv_from_xy @ np.array([p[0], p[1], 1.0])
-        th, tw = wall_map.texture.shape[:2]
-        col, row = int(np.floor(u * tw)), int(np.floor((1.0 - v) * th))
-        return 0 <= col < tw and 0 <= row < th and wall_map.texture[row, col, 3] > 0
-    x0, y0, x1, y1 = wall_map.extent
-    return bool(x0 <= p[0] <= x1 and y0 <= p[1] <= y1)
-
-
 def check_drill_point(wall_map: WallMap, xy: NDArray[np.float64], registration_sigma_m: float,
-                      drill_radius_m: float = 0.004) -> DrillCheck:
-    """Verdict for drilling at wall point xy (metres): keep away when the hole (radius drill_radius_m) would
-    reach into any object's safety band, unknown where the wall was not scanned, else safe."""
-    best: tuple[float, float, MapObject | None] = (np.inf, np.inf, None)
-    for obj in wall_map.objects:
-        d = distance_to_object_m(obj, xy)
-        clearance = d - drill_radius_m - safety_margin_m(obj, registration_sigma_m)
-        if clearance < best[1]:
-            best = (d, clearance, obj)
-    distance, clearance, nearest = best
-    scanned = point_scanned(wall_map, xy)
-    if clearance < 0:
-        verdict = VERDICT_KEEP_AWAY
-    elif not scanned:
-        verdict = VERDICT_UNKNOWN
-    else:
-        verdict = VERDICT_SAFE
-    return DrillCheck(verdict, float(distance), float(clearance), nearest, scanned)
+                      drill_radius_m: float = drill.DRILL_RADIUS_M) -> DrillVerdict:
+    """mapping.drill's verdict for drilling at wall point xy (metres) on this map; without a coverage layer
+    every point is unknown."""
+    if wall_map.coverage is None:
+        return DrillVerdict(float(xy[0]), float(xy[1]), drill.UNKNOWN, "no coverage layer: nothing was looked at",
+                            None, float("inf"), float("inf"))
+    return drill.check_point(xy, wall_map.objects, wall_map.coverage, wall_map.coverage.wall_bounds,
+                             registration_sigma_m, drill_radius_m)
 
 
 # -- projector-space parts: legend and status ---------------------------------------------------------------

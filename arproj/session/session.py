@@ -164,11 +164,11 @@ class ProjectionSession:
         self.registration = None  # the head moved: the old registration no longer holds
         return pan, tilt
 
-    def set_drill_point(self, wall_xy: ArrayLike | None) -> overlays.DrillCheck | None:
+    def set_drill_point(self, wall_xy: ArrayLike | None) -> overlays.DrillVerdict | None:
         self.drill_xy = None if wall_xy is None else np.asarray(wall_xy, dtype=np.float64).reshape(2)
         return None if self.drill_xy is None else self.drill_check(self.drill_xy)
 
-    def drill_check(self, wall_xy: ArrayLike) -> overlays.DrillCheck:
+    def drill_check(self, wall_xy: ArrayLike) -> overlays.DrillVerdict:
         sigma = self.last_decision.registration_sigma_m if self.last_decision else np.inf
         sigma = sigma if np.isfinite(sigma) else self.tolerance_m / tol.Z95
         return overlays.check_drill_point(self.wall_map, np.asarray(wall_xy, dtype=np.float64), sigma)

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+from mapping.drill import BASE_SAFETY_MARGIN_M, Z95  # noqa: F401  (one source: the drill check's numbers)
+from mapping.mapfile import DEFAULT_SIGMA_M as DEFAULT_MAP_SIGMA_M  # noqa: F401
+
 # Safety gate: a map is shown only while the registration error on the wall is believed (95 %) below this.
 REGISTRATION_TOLERANCE_M = 0.010
-# Safety band: drawn half-width = object half-width + BASE_MARGIN + Z95 · sqrt(σ_map² + σ_registration²).
-BASE_SAFETY_MARGIN_M = 0.010
-Z95 = 1.96
-DEFAULT_MAP_SIGMA_M = 0.003  # position σ of a mapped object when objects.json gives none (mapping's target)
-MIN_CONFIDENCE_FOR_SIGMA = 0.25  # σ_map grows as 1/confidence, down to this confidence
+# Safety band: drawn half-width = object half-width + BASE_MARGIN + Z95 · sqrt(σ_map² + σ_registration²); the
+# drill check (mapping.drill) judges by the same numbers.
+# (BASE_SAFETY_MARGIN_M, Z95 and DEFAULT_MAP_SIGMA_M come from mapping, imported above)
+
+TRUTH_COVERAGE_CELL_M = 0.004  # coverage grid of a map made from a wall file's truth (every cell looked at)
 
 # Overlay raster on the wall (texture of the projected mesh)
 OVERLAY_PX_PER_M = 500.0  # 2 mm per texel: below one projector pixel's footprint at 2 m

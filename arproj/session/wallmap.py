@@ -1,10 +1,11 @@
-"""The in-wall map the session projects: the mapping's mesh (wall.glb) and its objects (objects.json).
+"""The in-wall map the session projects: the mapping's mesh (wall.glb), its objects (objects.json) and the
+evidence behind them (coverage.npz), as `arproj map --out DIR` writes them.
 
     wall.glb      textured triangle mesh in the WALL frame (metres); its RGBA texture is the in-wall map,
                   alpha 0 where the wall was not scanned
-    objects.json  {"objects": [{"class": "power_line", "points_m": [[x, y], …], "width_m": 0.01,
-                  "confidence": 0.97, "position_sigma_m": 0.002 (optional)}, …],
-                  "scanned_regions_m": [[[x, y], …], …] (optional polygons)}
+    objects.json  the mapped objects (mapping.mapfile): class, polyline, width, σ, depth, measured/inferred
+    coverage.npz  per sensor channel, what its footprint covered and where it responded (mapping.evidence):
+                  the drill check judges by it
 
 Classes are the mapping's: power_line, metal_pipe, metal, fastener, wood, cavity. Pipes and cables are
 polylines, fasteners single points, studs (wood) and cavities closed outlines.
@@ -12,7 +13,6 @@ polylines, fasteners single points, studs (wood) and cavities closed outlines.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,36 +22,26 @@ from numpy.typing import NDArray
 
 from arproj.session import tolerances as tol
 from geometry.errors import InputError
+from mapping.evidence import FILE_NAME as COVERAGE_FILE
+from mapping.evidence import Coverage
+from mapping.grid import GridInfo
+from mapping.mapfile import FILE_NAME as OBJECTS_FILE
+from mapping.mapfile import MAP_CLASSES, OUTLINE_CLASSES, MappedObject, read_objects
 
-MAP_CLASSES = ("power_line", "metal_pipe", "metal", "fastener", "wood", "cavity")
-OUTLINE_CLASSES = ("wood", "cavity")
-
-
-@dataclass
-class MapObject:
-    """One mapped object in wall coordinates. points_m: (n, 2) float64, metres."""
-
-    kind: str
-    points_m: NDArray[np.float64]
-    width_m: float
-    confidence: float = 1.0
-    sigma_m: float = tol.DEFAULT_MAP_SIGMA_M
-
-    @property
-    def is_outline(self) -> bool:
-        return self.kind in OUTLINE_CLASSES and len(self.points_m) >= 3
+__all__ = ["MAP_CLASSES", "OUTLINE_CLASSES", "MappedObject", "WallMap", "load_wall_map", "wall_map_from_wall",
+           "wall_map_from_wall_file"]
 
 
 @dataclass
 class WallMap:
     """mesh: in the wall frame (metres); texture: the mapping's RGBA map with the affine wall-xy → uv it uses
-    (uv_from_xy: (2, 3)); scanned: polygons (list of (n, 2)) where the wall was scanned."""
+    (uv_from_xy: (2, 3)); coverage: the scan's evidence (None: nothing was looked at, every point unknown)."""
 
     mesh: trimesh.Trimesh
-    objects: list[MapObject] = field(default_factory=list)
+    objects: list[MappedObject] = field(default_factory=list)
     texture: NDArray[np.uint8] | None = None
     uv_from_xy: NDArray[np.float64] | None = None
-    scanned: list[NDArray[np.float64]] = field(default_factory=list)
+    coverage: Coverage | None = None
     source: str = ""
 
     @property
@@ -62,7 +52,8 @@ class WallMap:
 
 
 def load_wall_map(glb_path: str | Path, objects_path: str | Path | None = None) -> WallMap:
-    """Read wall.glb and objects.json (default: beside the GLB). InputError names the file and the problem."""
+    """Read wall.glb, objects.json and coverage.npz (default: beside the GLB). InputError names the file and
+    the problem; a map folder without its coverage layer is refused (no point could be judged)."""
     glb_path = Path(glb_path)
     if not glb_path.exists():
         raise InputError(f"{glb_path}: no such map file", "pass the wall.glb written by `arproj map … --out DIR`")
@@ -74,64 +65,10 @@ def load_wall_map(glb_path: str | Path, objects_path: str | Path | None = None) 
                          "re-export it with `arproj map`") from None
     mesh = _single_mesh(loaded, glb_path)
     texture, uv_from_xy = _texture_and_uv_map(mesh, glb_path)
-    objects_path = Path(objects_path) if objects_path is not None else glb_path.with_name("objects.json")
-    objects, scanned = ([], []) if not objects_path.exists() else read_objects(objects_path)
-    # without scanned_regions_m, coverage comes from the texture's alpha (see overlays.scanned_mask)
-    return WallMap(mesh, objects, texture, uv_from_xy, scanned, source=str(glb_path))
-
-
-def read_objects(path: str | Path) -> tuple[list[MapObject], list[NDArray[np.float64]]]:
-    """objects.json → (objects, scanned polygons)."""
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such objects file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise InputError(f"{path}: not valid JSON ({err})", "re-export it with `arproj map`") from None
-    if not isinstance(doc, dict) or not isinstance(doc.get("objects"), list):
-        raise InputError(f"{path}: expected {{\"objects\": [...]}}")
-    objects = []
-    for i, item in enumerate(doc["objects"]):
-        where = f"{path}: objects[{i}]"
-        if not isinstance(item, dict):
-            raise InputError(f"{where} is not an object")
-        kind = item.get("class")
-        if kind not in MAP_CLASSES:
-            raise InputError(f"{where}: class {kind!r} is unknown", f"use one of {', '.join(MAP_CLASSES)}")
-        try:
-            points = np.asarray(item["points_m"], dtype=np.float64).reshape(-1, 2)
-            width = float(item["width_m"])
-            confidence = float(item.get("confidence", 1.0))
-            sigma = item.get("position_sigma_m")
-        except KeyError as err:
-            raise InputError(f"{where}: key {err.args[0]!r} is missing") from None
-        except (TypeError, ValueError):
-            raise InputError(f"{where}: points_m must be [[x, y], …] and width_m a number (metres)") from None
-        if len(points) == 0 or not np.all(np.isfinite(points)) or not (np.isfinite(width) and width >= 0):
-            raise InputError(f"{where}: needs at least one finite point and a width ≥ 0, got width_m={width}")
-        if sigma is None:
-            sigma = tol.DEFAULT_MAP_SIGMA_M / max(min(confidence, 1.0), tol.MIN_CONFIDENCE_FOR_SIGMA)
-        objects.append(MapObject(kind, points, width, confidence, float(sigma)))
-    scanned = []
-    for i, poly in enumerate(doc.get("scanned_regions_m") or []):
-        try:
-            p = np.asarray(poly, dtype=np.float64).reshape(-1, 2)
-        except (TypeError, ValueError):
-            raise InputError(f"{path}: scanned_regions_m[{i}] must be [[x, y], …]") from None
-        if len(p) < 3:
-            raise InputError(f"{path}: scanned_regions_m[{i}] needs at least 3 corners")
-        scanned.append(p)
-    return objects, scanned
-
-
-def write_objects(path: str | Path, objects: list[MapObject], scanned: list[NDArray[np.float64]] = ()) -> None:
-    """objects.json in the mapping's format (with position_sigma_m and scanned_regions_m)."""
-    doc = {"objects": [{"class": o.kind, "points_m": o.points_m.tolist(), "width_m": o.width_m,
-                        "confidence": o.confidence, "position_sigma_m": o.sigma_m} for o in objects]}
-    if len(scanned):
-        doc["scanned_regions_m"] = [np.asarray(p).tolist() for p in scanned]
-    Path(path).write_text(json.dumps(doc, indent=1))
+    objects_path = Path(objects_path) if objects_path is not None else glb_path.with_name(OBJECTS_FILE)
+    objects = read_objects(objects_path) if objects_path.exists() else []
+    coverage = Coverage.load(glb_path.with_name(COVERAGE_FILE))
+    return WallMap(mesh, objects, texture, uv_from_xy, coverage, source=str(glb_path))
 
 
 def plane_mesh(x0: float, y0: float, x1: float, y1: float) -> trimesh.Trimesh:
@@ -209,8 +146,12 @@ def wall_map_from_wall(wall: object, source: str = "wall truth") -> WallMap:
     objects = []
     for o in wall.objects:  # type: ignore[attr-defined]
         width = float(o.diameter_m or 0.0)
-        objects.append(MapObject(_class_of(o), np.asarray(o.geometry_m, dtype=np.float64), width, 1.0,
-                                 tol.TRUTH_MAP_SIGMA_M))
+        geometry = np.asarray(o.geometry_m, dtype=np.float64)
+        shape = "point" if o.kind in ("screw", "nail") else "outline" if len(geometry) >= 3 and o.kind in (
+            "stud", "beam", "plate", "cavity") else "line"
+        objects.append(MappedObject(_class_of(o), geometry, width, 1.0, tol.TRUTH_MAP_SIGMA_M,
+                                    depth_m=float(o.depth_m), depth_sigma_m=0.0, shape=shape))
     w, h = wall.width_m, wall.height_m  # type: ignore[attr-defined]
-    rect = np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
-    return WallMap(plane_mesh(0.0, 0.0, w, h), objects, scanned=[rect], source=source)
+    # The truth is known everywhere: what a complete, perfect scan would have covered.
+    coverage = Coverage.complete(GridInfo.covering(0.0, 0.0, w, h, tol.TRUTH_COVERAGE_CELL_M), bounds=(0.0, 0.0, w, h))
+    return WallMap(plane_mesh(0.0, 0.0, w, h), objects, coverage=coverage, source=source)

@@ -5,12 +5,19 @@ import pytest
 
 from arproj.session import overlays
 from arproj.session import tolerances as tol
-from arproj.session.wallmap import MapObject, WallMap, plane_mesh
+from arproj.session.wallmap import WallMap, plane_mesh
+from mapping.evidence import Coverage
+from mapping.grid import GridInfo
+from mapping.mapfile import MappedObject as MapObject
 
 
-def _wall(objects, scanned=None):
-    rect = np.array([[0, 0], [3.0, 0], [3.0, 2.5], [0, 2.5]], dtype=float)
-    return WallMap(plane_mesh(0, 0, 3.0, 2.5), objects, scanned=[rect] if scanned is None else scanned)
+def _wall(objects, covered_x_from=0.0):
+    """A 3 × 2.5 m wall whose scan covered everything right of covered_x_from (every channel, no response)."""
+    coverage = Coverage.complete(GridInfo.covering(0.0, 0.0, 3.0, 2.5, 0.004))
+    xs, _ = coverage.info.cell_centres()
+    for layer in coverage.covered.values():
+        layer[:, xs < covered_x_from] = False
+    return WallMap(plane_mesh(0, 0, 3.0, 2.5), objects, coverage=coverage)
 
 
 CABLE = MapObject("power_line", np.array([[1.0, 0.0], [1.0, 2.5]]), 0.008, 1.0, 0.002)
@@ -64,8 +71,7 @@ def test_drill_check_distances_and_verdicts():
 
 
 def test_unscanned_point_is_unknown_and_zones_drawn_only_there():
-    scanned = [np.array([[1.5, 0.0], [3.0, 0.0], [3.0, 2.5], [1.5, 2.5]])]
-    wall = _wall([], scanned=scanned)
+    wall = _wall([], covered_x_from=1.5)
     assert overlays.check_drill_point(wall, np.array([0.5, 1.0]), 0.002).verdict == overlays.VERDICT_UNKNOWN
     assert overlays.check_drill_point(wall, np.array([2.0, 1.0]), 0.002).verdict == overlays.VERDICT_SAFE
     raster = overlays.draw_map(wall, 0.002)

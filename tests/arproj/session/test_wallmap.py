@@ -1,4 +1,4 @@
-"""Loading the mapping's exports (wall.glb + objects.json) and the bad-input messages."""
+"""Loading the mapping's exports (wall.glb + objects.json + coverage.npz) and the bad-input messages."""
 
 import json
 
@@ -10,6 +10,8 @@ from PIL import Image
 from arproj.session import overlays
 from arproj.session.wallmap import load_wall_map, plane_mesh, wall_map_from_wall_file
 from geometry.errors import InputError
+from mapping.evidence import Coverage
+from mapping.grid import GridInfo
 from scanner.wall import shipped_walls
 
 
@@ -25,9 +27,14 @@ def _write_glb(path, width=2.0, height=1.5, scanned_right_half=True):
     material = trimesh.visual.material.SimpleMaterial(image=Image.fromarray(texture, "RGBA"))
     mesh.visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
     mesh.export(path)
+    coverage = Coverage.complete(GridInfo.covering(0.0, 0.0, width, height, 0.004))
+    xs, _ = coverage.info.cell_centres()
+    for layer in coverage.covered.values():
+        layer[:, xs < (width / 2 if scanned_right_half else 0.0)] = False
+    coverage.save(path.with_name("coverage.npz"))
 
 
-def test_glb_and_objects_load_with_coverage_from_alpha(tmp_path):
+def test_glb_objects_and_coverage_load_and_judge_points(tmp_path):
     _write_glb(tmp_path / "wall.glb")
     (tmp_path / "objects.json").write_text(json.dumps({"objects": [
         {"class": "power_line", "points_m": [[1.5, 0.0], [1.5, 1.5]], "width_m": 0.01, "confidence": 0.5},
@@ -36,12 +43,20 @@ def test_glb_and_objects_load_with_coverage_from_alpha(tmp_path):
     wm = load_wall_map(tmp_path / "wall.glb")
     assert wm.extent == pytest.approx((0.0, 0.0, 2.0, 1.5))
     assert wm.uv_from_xy == pytest.approx(np.array([[0.5, 0, 0], [0, 1 / 1.5, 0]]), abs=1e-6)
-    assert [o.kind for o in wm.objects] == ["power_line", "cavity"]
+    assert [o.cls for o in wm.objects] == ["power_line", "cavity"]
     assert wm.objects[0].sigma_m == pytest.approx(0.006)  # 3 mm default / confidence 0.5
     assert wm.objects[1].sigma_m == pytest.approx(0.004) and wm.objects[1].is_outline
-    assert overlays.point_scanned(wm, np.array([1.5, 0.7]))
-    assert not overlays.point_scanned(wm, np.array([0.5, 0.7]))
-    assert overlays.check_drill_point(wm, np.array([0.5, 0.7]), 0.001).verdict == overlays.VERDICT_UNKNOWN
+    assert overlays.check_drill_point(wm, np.array([1.2, 0.7]), 0.001).verdict == overlays.VERDICT_SAFE
+    assert overlays.check_drill_point(wm, np.array([1.5, 0.7]), 0.001).verdict == overlays.VERDICT_KEEP_AWAY
+    unscanned = overlays.check_drill_point(wm, np.array([0.5, 0.7]), 0.001)
+    assert unscanned.verdict == overlays.VERDICT_UNKNOWN and "not scanned" in unscanned.reason
+
+
+def test_a_map_folder_without_its_coverage_layer_is_refused(tmp_path):
+    _write_glb(tmp_path / "wall.glb")
+    (tmp_path / "coverage.npz").unlink()
+    with pytest.raises(InputError, match=r"coverage.*arproj map"):
+        load_wall_map(tmp_path / "wall.glb")
 
 
 def test_missing_and_malformed_glb_give_messages(tmp_path):
@@ -57,9 +72,11 @@ def test_missing_and_malformed_glb_give_messages(tmp_path):
     ("{", "not valid JSON"),
     ('{"things": []}', 'expected {"objects"'),
     ('{"objects": [{"class": "dragon", "points_m": [[0, 0]], "width_m": 0.01}]}', "class 'dragon' is unknown"),
-    ('{"objects": [{"class": "metal_pipe", "width_m": 0.01}]}', "key 'points_m' is missing"),
+    ('{"objects": [{"class": "metal_pipe", "width_m": 0.01}]}', "points_m must be a list"),
     ('{"objects": [{"class": "metal_pipe", "points_m": [[0, "x"]], "width_m": 0.01}]}', "points_m must be"),
-    ('{"objects": [{"class": "metal_pipe", "points_m": [[0, 0]], "width_m": -1}]}', "width ≥ 0"),
+    ('{"objects": [{"class": "metal_pipe", "points_m": [[0, 0]], "width_m": -1}]}', "width_m = -1 is outside"),
+    ('{"objects": [{"class": "metal_pipe", "points_m": [[0, 0], [1, 0]], "width_m": 0.01, "measured": [1]}]}',
+     "measured must be a list of 1 true/false"),
 ])
 def test_bad_objects_json_names_the_problem(tmp_path, doc, message):
     _write_glb(tmp_path / "wall.glb")
@@ -70,6 +87,6 @@ def test_bad_objects_json_names_the_problem(tmp_path, doc, message):
 
 def test_truth_map_from_a_wall_file_uses_the_mapping_classes():
     wm = wall_map_from_wall_file(shipped_walls()["paper_test_plate"])
-    kinds = {o.kind for o in wm.objects}
+    kinds = {o.cls for o in wm.objects}
     assert "power_line" in kinds and "metal_pipe" in kinds
-    assert all(o.width_m > 0 for o in wm.objects if o.kind in ("power_line", "metal_pipe"))
+    assert all(o.width_m > 0 for o in wm.objects if o.cls in ("power_line", "metal_pipe"))

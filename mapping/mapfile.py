@@ -1,0 +1,187 @@
+"""objects.json as its readers see it: the mapped objects with their evidence (measured or inferred), depth and
+uncertainty. `arproj map` writes it (mapping.export); the drill check, the projection session and the report
+read it here, so there is one reader and its checks.
+
+    {"format": "arproj-objects/2", "frame": "wall", "units": "m",
+     "objects": [{"class": "power_line", "kind": "line" | "point" | "outline", "points_m": [[x, y], …],
+                  "width_m": w, "confidence": 0…1, "position_sigma_m": σ,
+                  "depth_m": d | null, "depth_sigma_m": σ_d | null,
+                  "measured": [true, false, …]}, …],
+     "scanned_regions_m": [{"exterior": [[x, y], …], "holes": [[[x, y], …], …]}, …]}
+
+`measured` has one entry per segment of a line (len(points_m) − 1) and one for a point or outline: true where
+a sensor that sees that class covered the stretch, false where it was joined across unmeasured ground
+(inferred). Files of format 1 (no `format` key) are read with every stretch measured; their scanned regions
+are outer outlines only and are ignored: coverage comes from coverage.npz (mapping.evidence).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from geometry.errors import InputError
+
+FORMAT = "arproj-objects/2"
+FILE_NAME = "objects.json"
+MAP_CLASSES = ("power_line", "metal_pipe", "metal", "fastener", "wood", "cavity")
+OUTLINE_CLASSES = ("wood", "cavity")
+SHAPES = ("line", "point", "outline")
+DEFAULT_SIGMA_M = 0.003  # position σ of a mapped object when objects.json gives none (mapping's target)
+MIN_CONFIDENCE_FOR_SIGMA = 0.25  # σ grows as 1/confidence, down to this confidence
+MAX_OBJECTS = 100_000  # more is no map of one wall: refuse before allocating
+MAX_POINTS = 1_000_000
+
+
+@dataclass
+class MappedObject:
+    """One mapped object in wall coordinates. points_m: (n, 2) float64, metres; measured: (segments,) bool
+    (None: all measured)."""
+
+    cls: str
+    points_m: NDArray[np.float64]
+    width_m: float
+    confidence: float = 1.0
+    sigma_m: float = DEFAULT_SIGMA_M
+    depth_m: float | None = None
+    depth_sigma_m: float | None = None
+    measured: NDArray[np.bool_] | None = None
+    shape: str | None = None  # line | point | outline; None: from the class and the number of points
+
+    def __post_init__(self) -> None:
+        self.points_m = np.asarray(self.points_m, dtype=np.float64).reshape(-1, 2)
+        if self.shape is None:
+            self.shape = ("point" if len(self.points_m) == 1 else
+                          "outline" if self.cls in OUTLINE_CLASSES and len(self.points_m) >= 3 else "line")
+
+    @property
+    def is_outline(self) -> bool:
+        return self.shape == "outline"
+
+    @property
+    def n_segments(self) -> int:
+        return max(len(self.points_m) - 1, 1) if self.shape == "line" else 1
+
+    def measured_segments(self) -> NDArray[np.bool_]:
+        if self.measured is None:
+            return np.ones(self.n_segments, bool)
+        return np.asarray(self.measured, dtype=bool)
+
+    @property
+    def fully_measured(self) -> bool:
+        return bool(self.measured_segments().all())
+
+    def parts(self, measured: bool) -> list[NDArray[np.float64]]:
+        """The polylines (k, 2) of this line's measured (or inferred) stretches; a point or an outline is one
+        part, whole."""
+        flags = self.measured_segments()
+        if self.shape != "line" or len(self.points_m) < 2:
+            return [self.points_m] if bool(flags[0]) == measured else []
+        out, run = [], None
+        for k, flag in enumerate(flags):
+            if bool(flag) == measured:
+                run = [self.points_m[k]] if run is None else run
+                run.append(self.points_m[k + 1])
+            elif run is not None:
+                out.append(np.array(run))
+                run = None
+        if run is not None:
+            out.append(np.array(run))
+        return out
+
+    def to_json(self) -> dict:
+        def opt(v: float | None, nd: int) -> float | None:
+            return None if v is None or not math.isfinite(v) else round(float(v), nd)
+
+        return {"class": self.cls, "kind": self.shape,
+                "points_m": [[round(float(x), 5), round(float(y), 5)] for x, y in self.points_m],
+                "width_m": round(float(self.width_m), 4), "confidence": round(float(self.confidence), 3),
+                "position_sigma_m": round(float(self.sigma_m), 5),
+                "depth_m": opt(self.depth_m, 4), "depth_sigma_m": opt(self.depth_sigma_m, 4),
+                "measured": [bool(m) for m in self.measured_segments()]}
+
+
+def _finite_number(where: str, key: str, value: object, lo: float, hi: float, optional: bool = False) -> float | None:
+    if value is None and optional:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"{where}: {key} must be a number, got {value!r}")
+    v = float(value)
+    if not (math.isfinite(v) and lo <= v <= hi):
+        raise InputError(f"{where}: {key} = {value!r} is outside {lo:g}…{hi:g}")
+    return v
+
+
+def parse_object(item: object, where: str) -> MappedObject:
+    if not isinstance(item, dict):
+        raise InputError(f"{where} is not an object")
+    cls = item.get("class")
+    if cls not in MAP_CLASSES:
+        raise InputError(f"{where}: class {cls!r} is unknown", f"use one of {', '.join(MAP_CLASSES)}")
+    raw_points = item.get("points_m")
+    if not isinstance(raw_points, list) or not raw_points or len(raw_points) > MAX_POINTS:
+        raise InputError(f"{where}: points_m must be a list [[x, y], …] of 1 to {MAX_POINTS} points")
+    try:
+        points = np.asarray(raw_points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{where}: points_m must be [[x, y], …] in metres") from None
+    if points.ndim != 2 or points.shape[1] != 2 or not np.all(np.isfinite(points)) or np.abs(points).max() > 1e3:
+        raise InputError(f"{where}: points_m must be [[x, y], …], finite, in metres (|value| ≤ 1000)")
+    if "width_m" not in item:
+        raise InputError(f"{where}: key 'width_m' is missing")
+    width = _finite_number(where, "width_m", item["width_m"], 0.0, 10.0)
+    confidence = _finite_number(where, "confidence", item.get("confidence", 1.0), 0.0, 1.0)
+    sigma = _finite_number(where, "position_sigma_m", item.get("position_sigma_m"), 0.0, 1.0, optional=True)
+    if sigma is None:
+        sigma = DEFAULT_SIGMA_M / max(min(confidence, 1.0), MIN_CONFIDENCE_FOR_SIGMA)  # type: ignore[type-var]
+    depth = _finite_number(where, "depth_m", item.get("depth_m"), 0.0, 1.0, optional=True)
+    depth_sigma = _finite_number(where, "depth_sigma_m", item.get("depth_sigma_m"), 0.0, 1.0, optional=True)
+    shape = item.get("kind")
+    if shape is not None and shape not in SHAPES:
+        raise InputError(f"{where}: kind {shape!r} is unknown", f"use one of {', '.join(SHAPES)}")
+    obj = MappedObject(str(cls), points, float(width), float(confidence), float(sigma),  # type: ignore[arg-type]
+                       depth, depth_sigma, None, shape)
+    measured = item.get("measured")
+    if measured is not None:
+        if not (isinstance(measured, list) and all(isinstance(m, bool) for m in measured)
+                and len(measured) == obj.n_segments):
+            raise InputError(f"{where}: measured must be a list of {obj.n_segments} true/false, one per segment")
+        obj.measured = np.array(measured, dtype=bool)
+    return obj
+
+
+def read_objects(path: str | Path) -> list[MappedObject]:
+    """objects.json → its objects; InputError names the file, the object and the problem."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such objects file", "pass the folder written by `arproj map … --out DIR`") \
+            from None
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as err:
+        raise InputError(f"{path}: not valid JSON ({type(err).__name__})", "re-export it with `arproj map`") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("objects"), list):
+        raise InputError(f"{path}: expected {{\"objects\": [...]}}")
+    if doc.get("format", FORMAT) not in (FORMAT, "arproj-objects/1"):
+        raise InputError(f"{path}: format {doc.get('format')!r} is not one this arproj reads ({FORMAT})")
+    if len(doc["objects"]) > MAX_OBJECTS:
+        raise InputError(f"{path}: {len(doc['objects'])} objects; a wall map has at most {MAX_OBJECTS}")
+    return [parse_object(item, f"{path}: objects[{i}]") for i, item in enumerate(doc["objects"])]
+
+
+def objects_document(objects: list[MappedObject], scanned_regions: list[dict] | None = None) -> dict:
+    doc: dict = {"format": FORMAT, "frame": "wall", "units": "m", "objects": [o.to_json() for o in objects]}
+    if scanned_regions is not None:
+        doc["scanned_regions_m"] = scanned_regions
+    return doc
+
+
+def write_objects(path: str | Path, objects: list[MappedObject], scanned_regions: list[dict] | None = None) -> Path:
+    path = Path(path)
+    path.write_text(json.dumps(objects_document(objects, scanned_regions), indent=1) + "\n")
+    return path
