@@ -212,3 +212,11 @@ def false_safe(objects: list[MappedObject], coverage: Coverage, wall: Wall, step
         out.safe_m[obj.id] = length * sum(v == SAFE for v in verdicts) / n
         out.unknown_m[obj.id] = length * sum(v == UNKNOWN for v in verdicts) / n
     return out
+
+
+def fastener_recall(objects: list[MapObject], wall: Wall, match_m: float = MATCH_M) -> tuple[int, int]:
+    """(found, total) of the wall's screws and nails: found when a mapped fastener lies within match_m."""
+    truth = [np.asarray(o.geometry_m, dtype=np.float64)[0] for o in wall.objects if o.kind in ("screw", "nail")]
+    mapped = np.array([np.asarray(o.points_m)[0] for o in objects if o.cls == "fastener"]).reshape(-1, 2)
+    found = sum(bool(len(mapped)) and float(np.min(np.linalg.norm(mapped - t, axis=1))) <= match_m for t in truth)
+    return int(found), len(truth)

@@ -222,7 +222,13 @@ def unexplained_cells(grid: WallGrid, sensor: str, objects: list[MapObject], cov
     for col in columns:
         reach |= np.abs(col) > 1e-3
     far = known & ~reach
-    level = float(np.median(y[far])) if far.sum() >= _MIN_BACKGROUND_CELLS else None
+    level: float | None = None
+    if far.sum() >= _MIN_BACKGROUND_CELLS:
+        level = float(np.median(y[far]))
+    elif sensor != "capacitive" and np.isfinite(noise_sigma):
+        # objects only add to these channels: the empty wall is the low end (its 10th percentile lies
+        # 1.28 σ below its level), as long as a tenth of the cells are empty
+        level = float(np.percentile(y[known], 10)) + 1.2816 * noise_sigma
     for _ in range(_ROBUST_ROUNDS + 1):
         if not columns:
             coef = np.array([float(np.median(y[fit_mask])) if level is None else level])

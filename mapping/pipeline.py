@@ -51,6 +51,18 @@ class ScanData:
     def n_samples(self) -> int:
         return int(self.samples["time_s"].shape[0]) if "time_s" in self.samples else 0
 
+    @classmethod
+    def from_scan(cls, source: str, samples: dict[str, NDArray], frame_rows: list[dict[str, Any]],
+                  meta: dict[str, Any]) -> ScanData:
+        """A scan held in memory (scanner.run.ScanResult's samples and frame rows) as the log would give it."""
+        frames: dict[str, NDArray] = {}
+        if frame_rows:
+            keys = sorted({k for r in frame_rows for k in r} - {"cov"})
+            frames = {k: np.asarray([r.get(k, np.nan) for r in frame_rows], dtype=np.float64) for k in keys}
+            frames["frame_id"] = frames["frame_id"].astype(np.int64)
+            frames["cov"] = np.asarray([r["cov"] for r in frame_rows], dtype=np.float64).reshape(-1, 3, 3)
+        return cls(source, samples, frames, {"status": "complete", **meta})
+
 
 def load_scan(path: str | Path) -> ScanData:
     """Read a scan log; unreadable passes are skipped with a warning (a truncated or damaged file)."""

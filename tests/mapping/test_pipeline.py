@@ -201,6 +201,24 @@ def test_sparse_adaptive_scan_from_the_scanner_is_mapped_from_its_passes(tmp_pat
     mean, p95 = ev.position_mm()
     assert mean < 2.5 and p95 < 4.0  # within the bench's 3 / 6 mm; 2σ of the 2 mm position σ at p95
     assert all(t == p for t, p in ev.class_pairs)
+    # The promise on a sparse scan: nothing true is called safe, and what lies between the passes (inferred
+    # stretches, ground no footprint reached) is unknown, not safe.
+    from mapping import drill
+    from mapping.evaluate import false_safe
+
+    objects = result.mapped_objects()
+    fs = false_safe(objects, result.coverage, wall)
+    assert fs.share == 0.0, fs.safe_m
+    assert any(not o.fully_measured for o in objects)  # lines joined across unmeasured ground say so
+    looked = result.coverage.covered_share()
+    assert looked < 0.5  # an adaptive scan looks at a fraction of the wall
+    xs, ys = result.coverage.info.cell_centres()
+    unlooked = ~result.coverage.covered_by_all()
+    rows, cols = np.nonzero(unlooked)
+    pick = np.random.default_rng(0).choice(len(rows), 50, replace=False)
+    for r, c in zip(rows[pick], cols[pick], strict=True):
+        v = drill.check_point((xs[c], ys[r]), objects, result.coverage, result.bounds)
+        assert v.verdict != drill.SAFE, v
 
 
 def test_cli_bad_log_is_one_line_with_status_2(tmp_path):

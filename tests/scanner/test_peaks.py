@@ -1,11 +1,9 @@
-"""The 1-D peak detector and the segment extractor's evaluation."""
+"""The 1-D peak detector and its half-maximum walk."""
 
 import numpy as np
 import pytest
 
-from scanner.extract import evaluate
 from scanner.peaks import detect_peaks, level_crossings
-from scanner.wall import random_wall
 
 
 def _signal(x, centres, sigma, height, seed=0):
@@ -28,20 +26,6 @@ def test_two_peaks_any_order_and_a_cut_off_peak_is_not_reported():
     found = detect_peaks(x[::-1], y[::-1])  # a pass in the other direction
     assert [round(p.position, 3) for p in found] == [0.1, 0.2]
     assert detect_peaks(x, _signal(x, [], 0.01, 0.0)) == []  # noise alone
-
-
-def test_evaluation_against_the_truth():
-    wall = random_wall(2)
-    exact = [t.points_m[i:i + 2] for t in wall.targets() for i in range(len(t.points_m) - 1)]
-    ev = evaluate(wall, exact)
-    # The truth itself: zero up to float64 round-off on metre-scale coordinates.
-    assert ev.recall == 1.0 and ev.mean_error_m == pytest.approx(0.0, abs=1e-9) and ev.false_length_m < 1e-9
-    up, right = np.array([0.0, 0.01]), np.array([0.01, 0.0])
-    shifted = [s + up if abs(s[1, 1] - s[0, 1]) < 1e-9 else s + right for s in exact]
-    # 1 cm shifts; a sloped run shifted along x sits 1 cm x cos(slope) away, so the mean falls a little short
-    assert evaluate(wall, shifted).mean_error_m == pytest.approx(0.01, abs=0.002)
-    far = [s + np.array([0.05, 0.05]) for s in exact]
-    assert evaluate(wall, far).recall < 0.5  # 5-7 cm off: beyond evaluate's 1.5 cm match distance
 
 
 def test_level_crossings_are_interpolated_between_samples_and_none_for_a_cut_off_peak():

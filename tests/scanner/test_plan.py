@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from geometry.errors import InputError
-from scanner.extract import evaluate, extract_segments
 from scanner.plan import (
     DensePlanner,
     DriveConfig,
@@ -81,15 +80,12 @@ def test_dense_raster_is_the_papers_way_and_the_time_model_adds_up():
     assert len(result.samples["time_s"]) == 31 * len(sample_times(line, sensor.rate_hz))
 
 
-def test_adaptive_plan_finds_every_pipe_and_cable_in_a_fifth_of_the_dense_time():
+def test_adaptive_plan_takes_under_a_fifth_of_the_dense_time():
     wall = random_wall(7)
     drives, sensor = DriveConfig(), SensorConfig()
     dense = DensePlanner(wall, drives)
     dense_time = _estimate_total(dense, dense.frames(), drives)
     world, robot = simulated_site(wall, sensor, drives, 7)
     result = run_scan(wall, DirectBackend(world), robot, plan_kind="adaptive", sensor=sensor, drives=drives)
-    assert result.scan_time_s < 0.2 * dense_time  # the bench's TARGET_TIME_RATIO
-    ev = evaluate(wall, extract_segments(result.samples))
-    assert ev.recall == 1.0, ev.per_object
-    assert ev.mean_error_m < 0.005  # the bench's scan target (TARGET_ERROR_MM, 5 mm)
-    assert ev.false_length_m < 0.3  # under 2.5 % of the wall's 12.7 m of pipes and cables
+    assert result.scan_time_s < 0.2 * dense_time  # the bench's TARGET_TIME_RATIO_RANDOM
+    # what the map makes of it (recall, false-safe length): tests/mapping/test_adaptive_scan.py
