@@ -231,7 +231,7 @@ def stage_scan(ctx: DemoContext) -> None:
 
 def stage_map(ctx: DemoContext) -> None:
     """Map from the scan log (stitched frames), every export, and the map's accuracy against the wall file."""
-    from mapping.evaluate import evaluate
+    from mapping.evaluate import evaluate, false_safe, fastener_recall
     from mapping.export import export_all
     from mapping.pipeline import sample_positions
 
@@ -239,10 +239,19 @@ def stage_map(ctx: DemoContext) -> None:
     export_all(data, result, ctx.out / "map")
     ev = evaluate(result.objects, ctx.wall)
     mean_mm, p95_mm = ev.position_mm()
+    safe = false_safe(result.mapped_objects(), result.coverage, ctx.wall)
+    worst, worst_share = safe.worst()
+    fasteners_found, fasteners = fastener_recall(result.objects, ctx.wall)
     figures: dict[str, Any] = {"objects found": len(result.objects), "targets in the wall": ev.n_targets,
                                "targets found": ev.n_found, "recall": ev.recall, "precision": ev.precision,
                                "position error mean mm": mean_mm, "position error p95 mm": p95_mm,
-                               "class accuracy": ev.class_accuracy(), "missed": ", ".join(ev.missed) or "none"}
+                               "class accuracy": ev.class_accuracy(), "missed": ", ".join(ev.missed) or "none",
+                               "fasteners found": f"{fasteners_found} of {fasteners}",
+                               "false-safe length %": 100 * safe.share,
+                               "hazard length unknown %": 100 * safe.unknown_share,
+                               "worst false-safe object": f"{worst} ({100 * worst_share:.1f} %)" if worst_share
+                               else "none",
+                               "wall looked at by both safety channels %": 100 * result.coverage.covered_share()}
     if result.truth_xy is not None and len(result.truth_xy) == len(result.sample_xy):
         logged = sample_positions(data)
         truth = result.truth_xy

@@ -220,3 +220,42 @@ def fastener_recall(objects: list[MapObject], wall: Wall, match_m: float = MATCH
     mapped = np.array([np.asarray(o.points_m)[0] for o in objects if o.cls == "fastener"]).reshape(-1, 2)
     found = sum(bool(len(mapped)) and float(np.min(np.linalg.norm(mapped - t, axis=1))) <= match_m for t in truth)
     return int(found), len(truth)
+
+
+AREA_MATCH_M = 0.02  # an area object is found when a mapped object of its kind lies this close to its middle
+_AREA_CLASSES = {"stud": ("non_metal", "wood", "metal"), "beam": ("non_metal", "wood", "metal"),
+                 "plate": ("metal", "metal_pipe"), "cavity": ("cavity",)}
+
+
+def area_recall(objects: list[MapObject], wall: Wall) -> tuple[int, int, list[str]]:
+    """(found, total, missed ids) of the wall's studs, beams, plates (socket boxes) and cavities: found when a
+    mapped object of a class the channels can give it (a wood stud: non-metal; a steel stud or plate: metal)
+    comes within AREA_MATCH_M of the area's middle or covers it."""
+    from mapping.objects import distances_to_polyline
+    from scanner.sensor_model import points_in_polygon
+
+    found, missed, total = 0, [], 0
+    for obj in wall.objects:
+        if obj.kind not in _AREA_CLASSES:
+            continue
+        total += 1
+        ring = np.asarray(obj.geometry_m, dtype=np.float64)
+        middle = ring.mean(axis=0, keepdims=True)
+        reach = AREA_MATCH_M + 0.5 * float(np.ptp(ring, axis=0).min())  # a line along a stud's middle counts
+        wanted = _AREA_CLASSES[obj.kind] if obj.material != "wood" else ("non_metal", "wood")
+        if obj.kind in ("stud", "beam") and obj.material == "steel":
+            wanted = ("metal",)
+        hit = False
+        for o in objects:
+            if o.cls not in wanted:
+                continue
+            pts = np.asarray(o.points_m, dtype=np.float64)
+            inside = o.kind == "outline" and len(pts) >= 3 and bool(points_in_polygon(middle, pts)[0])
+            near = float(distances_to_polyline(middle, pts)[0]) <= reach
+            if inside or near:
+                hit = True
+                break
+        found += hit
+        if not hit:
+            missed.append(obj.id)
+    return found, total, missed

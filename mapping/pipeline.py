@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from geometry.errors import InputError
 from mapping import tolerances as tol
+from mapping.depth import AcModel, estimate_depths
 from mapping.evidence import Coverage, coverage_radii, mapped_objects, sample_noise
 from mapping.fusion import Fuser, FusionParams, InductiveModel
 from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid
@@ -271,6 +272,9 @@ def build_map(data: ScanData, settings: MapSettings | None = None) -> MapResult:
     objects = extract_objects(grid, settings, data.meta.get("sensor"), data if sparse else None, xy, shift)
     if sparse:
         notes.append(f"sparse scan ({coverage:.0%} of the wall covered): lines linked from the passes' peaks")
+    sensor_meta = data.meta.get("sensor")
+    estimate_depths(objects, grid, data.samples, xy, InductiveModel.from_meta(sensor_meta), shift,
+                    AcModel.from_meta(sensor_meta))
     pass_ids = data.samples.get("pass_id", np.zeros(data.n_samples, np.int64))
     noise = {s: sample_noise(readings[s], pass_ids, s) for s in models}
     evidence = Coverage.from_grid(grid, looked, objects, coverage_radii(data.meta.get("sensor")), bounds, noise)

@@ -45,7 +45,7 @@ def _peaks_peer(data, wall) -> list[float]:
 
 
 def _accuracy(quick: bool, seed: int) -> tuple[list[list], dict, object]:
-    from mapping.evaluate import Evaluation, FalseSafe, evaluate, false_safe, fastener_recall
+    from mapping.evaluate import Evaluation, FalseSafe, area_recall, evaluate, false_safe, fastener_recall
     from mapping.pipeline import MapSettings, build_map
     from mapping.simscan import simulate_scan
     from scanner.hard_walls import hard_case_wall
@@ -60,6 +60,7 @@ def _accuracy(quick: bool, seed: int) -> tuple[list[list], dict, object]:
     total_random, total_shipped, total_hard = Evaluation(), Evaluation(), Evaluation()
     safe = FalseSafe()
     fasteners = [0, 0]
+    areas = [0, 0]
     peer_errors: list[float] = []
     rows = []
     for k, (name, wall) in enumerate(track(walls, "bench mapping: walls")):
@@ -73,6 +74,9 @@ def _accuracy(quick: bool, seed: int) -> tuple[list[list], dict, object]:
         found, n = fastener_recall(result.objects, wall)
         fasteners[0] += found
         fasteners[1] += n
+        found, n, _ = area_recall(result.objects, wall)
+        areas[0] += found
+        areas[1] += n
         peer_errors += _peaks_peer(data, wall)
         if name.startswith("hard"):
             continue
@@ -101,7 +105,7 @@ def _accuracy(quick: bool, seed: int) -> tuple[list[list], dict, object]:
     return rows, {"peer_mean_mm": float(pe.mean()) if pe.size else float("nan"),
                   "peer_p95_mm": float(np.percentile(pe, 95)) if pe.size else float("nan"),
                   "false_safe": safe.share, "unknown": safe.unknown_share, "worst": worst,
-                  "worst_share": worst_share, "fasteners": fasteners}, all_ev
+                  "worst_share": worst_share, "fasteners": fasteners, "areas": areas}, all_ev
 
 
 def _adaptive(quick: bool, seed: int) -> list[list]:
@@ -282,6 +286,9 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
                              "unit": "%", "target": "≥ 95 %",
                              "met": peer["fasteners"][0] >= 0.95 * peer["fasteners"][1], "peer": "–",
                              "peer_name": ""},
+        "recall studs, plates, cavities": {
+            "arproj": round(100 * peer["areas"][0] / max(peer["areas"][1], 1), 1), "unit": "%", "target": "≥ 90 %",
+            "met": peer["areas"][0] >= 0.9 * peer["areas"][1], "peer": "–", "peer_name": ""},
         "precision pipes+cables": {"arproj": round(100 * ev.precision, 2), "unit": "%", "target": "≥ 95 %",
                                    "met": ev.precision >= 0.95, "peer": "–", "peer_name": ""},
         "position error mean": {"arproj": round(mean, 2), "unit": " mm", "target": "≤ 3 mm", "met": mean <= 3.0,
