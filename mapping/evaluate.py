@@ -27,14 +27,19 @@ MAX_DEPTH_M = 0.05
 
 
 def truth_class(obj: WallObject) -> str:
+    """The class a perfect map would give a wall object: what its channels can tell (a water-filled plastic
+    pipe and a wooden stud both only raise the capacitive level: non-metal); a dry plastic pipe no channel
+    sees is "plastic_pipe", no mapped class."""
     if obj.kind == "cable":
         return "power_line"
     if obj.kind == "pipe":
-        return "metal_pipe" if obj.is_metal else "plastic_pipe"
+        if obj.is_metal:
+            return "metal_pipe"
+        return "non_metal" if obj.water_filled else "plastic_pipe"
     if obj.kind in ("screw", "nail"):
         return "fastener"
     if obj.kind in ("stud", "beam"):
-        return "wood" if obj.material == "wood" else "metal"
+        return "non_metal" if obj.material == "wood" else "metal"
     if obj.kind == "plate":
         return "metal"
     return obj.kind
@@ -259,3 +264,31 @@ def area_recall(objects: list[MapObject], wall: Wall) -> tuple[int, int, list[st
         if not hit:
             missed.append(obj.id)
     return found, total, missed
+
+
+def truth_under(obj: MapObject, wall: Wall, match_m: float = MATCH_M) -> WallObject | None:
+    """The true pipe, cable or screw a mapped line or point lies on (mean distance within match_m), or None."""
+    from mapping.objects import distances_to_polyline
+
+    best: tuple[float, WallObject] | None = None
+    for t in wall.objects:
+        if obj.kind == "point" and t.kind in ("screw", "nail"):
+            d = float(np.linalg.norm(obj.points_m[0] - np.asarray(t.points_m)[0]))
+        elif obj.kind == "line" and t.kind in ("pipe", "cable"):
+            d = float(distances_to_polyline(densify(obj.points_m, 0.005), np.asarray(t.points_m)).mean())
+        else:
+            continue
+        if best is None or d < best[0]:
+            best = (d, t)
+    return best[1] if best is not None and best[0] < match_m else None
+
+
+def depth_errors(objects: list[MapObject], wall: Wall) -> list[tuple[str, float, float]]:
+    """(true id, depth error m, reported σ m) of every mapped object with a depth that lies on a true one (a
+    spurious object is the mapping's error, not the depth's)."""
+    out = []
+    for obj in objects:
+        truth = truth_under(obj, wall) if obj.depth_m is not None else None
+        if truth is not None:
+            out.append((truth.id, float(obj.depth_m) - truth.depth_m, float(obj.depth_sigma_m or float("nan"))))
+    return out

@@ -45,7 +45,15 @@ def _peaks_peer(data, wall) -> list[float]:
 
 
 def _accuracy(quick: bool, seed: int) -> tuple[list[list], dict, object]:
-    from mapping.evaluate import Evaluation, FalseSafe, area_recall, evaluate, false_safe, fastener_recall
+    from mapping.evaluate import (
+        Evaluation,
+        FalseSafe,
+        area_recall,
+        depth_errors,
+        evaluate,
+        false_safe,
+        fastener_recall,
+    )
     from mapping.pipeline import MapSettings, build_map
     from mapping.simscan import simulate_scan
     from scanner.hard_walls import hard_case_wall
@@ -61,6 +69,7 @@ def _accuracy(quick: bool, seed: int) -> tuple[list[list], dict, object]:
     safe = FalseSafe()
     fasteners = [0, 0]
     areas = [0, 0]
+    depth: list[float] = []
     peer_errors: list[float] = []
     rows = []
     for k, (name, wall) in enumerate(track(walls, "bench mapping: walls")):
@@ -74,6 +83,7 @@ def _accuracy(quick: bool, seed: int) -> tuple[list[list], dict, object]:
         found, n = fastener_recall(result.objects, wall)
         fasteners[0] += found
         fasteners[1] += n
+        depth += [abs(e) for _, e, _ in depth_errors(result.objects, wall)]
         found, n, _ = area_recall(result.objects, wall)
         areas[0] += found
         areas[1] += n
@@ -105,7 +115,8 @@ def _accuracy(quick: bool, seed: int) -> tuple[list[list], dict, object]:
     return rows, {"peer_mean_mm": float(pe.mean()) if pe.size else float("nan"),
                   "peer_p95_mm": float(np.percentile(pe, 95)) if pe.size else float("nan"),
                   "false_safe": safe.share, "unknown": safe.unknown_share, "worst": worst,
-                  "worst_share": worst_share, "fasteners": fasteners, "areas": areas}, all_ev
+                  "worst_share": worst_share, "fasteners": fasteners, "areas": areas,
+                  "depth_mm": 1000 * float(np.mean(depth)) if depth else float("nan"), "depth_n": len(depth)}, all_ev
 
 
 def _adaptive(quick: bool, seed: int) -> list[list]:
@@ -286,6 +297,9 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
                              "unit": "%", "target": "≥ 95 %",
                              "met": peer["fasteners"][0] >= 0.95 * peer["fasteners"][1], "peer": "–",
                              "peer_name": ""},
+        "depth error mean": {"arproj": round(peer["depth_mm"], 2), "unit": " mm", "target": "≤ 5 mm",
+                             "met": peer["depth_mm"] <= 5.0, "peer": "–",
+                             "peer_name": f"{peer['depth_n']} objects with a depth on a true one"},
         "recall studs, plates, cavities": {
             "arproj": round(100 * peer["areas"][0] / max(peer["areas"][1], 1), 1), "unit": "%", "target": "≥ 90 %",
             "met": peer["areas"][0] >= 0.9 * peer["areas"][1], "peer": "–", "peer_name": ""},

@@ -35,12 +35,12 @@ LEGEND: tuple[tuple[str, tuple[int, int, int], tuple[str, ...]], ...] = (
     ("power line / live", (255, 45, 45), ("power_line",)),
     ("metal pipe", (40, 150, 255), ("metal_pipe",)),
     ("other metal", (255, 215, 0), ("metal", "fastener")),
-    ("wood or stud", (0, 210, 140), ("wood",)),
+    ("non-metal: stud or water pipe", (0, 210, 140), ("non_metal",)),
     ("cavity", (215, 120, 255), ("cavity",)),
 )
 CLASS_COLOR: dict[str, tuple[int, int, int]] = {c: colour for _, colour, classes in LEGEND for c in classes}
 # Drawing order: outlines under lines, power lines on top (the most dangerous object is never hidden).
-DRAW_ORDER = ("cavity", "wood", "fastener", "metal", "metal_pipe", "power_line")
+DRAW_ORDER = ("cavity", "non_metal", "fastener", "metal", "metal_pipe", "power_line")
 
 VERDICT_SAFE, VERDICT_KEEP_AWAY, VERDICT_UNKNOWN = drill.SAFE, drill.KEEP_AWAY, drill.UNKNOWN
 VERDICT_COLOR = {VERDICT_SAFE: (60, 255, 60), VERDICT_KEEP_AWAY: (255, 40, 40), VERDICT_UNKNOWN: (255, 200, 0)}
@@ -182,6 +182,8 @@ def draw_map(wall_map: WallMap, registration_sigma_m: float, drill_xy: NDArray[n
     for kind in DRAW_ORDER:
         for obj in (o for o in wall_map.objects if o.cls == kind):
             _draw_object(img, raster, obj, registration_sigma_m)
+    for obj in wall_map.objects:
+        _draw_depth_label(img, raster, obj, registration_sigma_m)
     if drill_xy is not None:
         check = check_drill_point(wall_map, drill_xy, registration_sigma_m)
         colour = VERDICT_COLOR[check.verdict]
@@ -266,6 +268,44 @@ def _draw_object(img: NDArray[np.uint8], raster: WallRaster, obj: MappedObject, 
         _paint(img, edge, margin_colour)
         thick = max(2, round(max(obj.width_m, 0.004) * s))
         dashed_polyline(img, raster.to_px(part), (*colour, 255), thick, INFERRED_DASH_M * s)
+
+
+DEPTH_LABEL_HEIGHT_M = 0.025  # text 2.5 cm high on the wall: legible from a few metres
+
+
+def _draw_depth_label(img: NDArray[np.uint8], raster: WallRaster, obj: MappedObject,
+                      registration_sigma_m: float) -> None:
+    """The object's depth ("32 mm deep") beside the middle of its first measured stretch, outside its band."""
+    if obj.depth_m is None or obj.is_outline:
+        return
+    parts = obj.parts(measured=True)
+    if not parts:
+        return
+    part = max(parts, key=lambda p: float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) if len(p) > 1 else 0.0)
+    if len(part) == 1:
+        anchor, normal = part[0], np.array([1.0, 1.0]) / np.sqrt(2.0)
+    else:
+        seg = np.diff(part, axis=0)
+        lengths = np.linalg.norm(seg, axis=1)
+        k = int(np.searchsorted(np.cumsum(lengths), 0.5 * lengths.sum()))
+        k = min(k, len(seg) - 1)
+        direction = seg[k] / max(float(lengths[k]), 1e-12)
+        anchor = part[k] + 0.5 * seg[k]
+        normal = np.array([-direction[1], direction[0]])
+        if normal[1] < 0 or (abs(normal[1]) < 1e-9 and normal[0] < 0):
+            normal = -normal  # labels above or right of the line
+    text = f"{obj.depth_m * 1000:.0f} mm deep"
+    s = raster.px_per_m
+    scale = DEPTH_LABEL_HEIGHT_M * s / 22.0  # FONT_HERSHEY_SIMPLEX is ~22 px high at scale 1
+    thick = max(1, round(scale * 2))
+    (tw, th), baseline = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
+    # the text's half-extent along the normal (with descenders and its dark outline) plus 3 mm of air
+    half_px = 0.5 * (abs(normal[1]) * (th + baseline) + abs(normal[0]) * tw) + thick + 3
+    offset = band_half_width_m(obj, registration_sigma_m) + 0.003 + half_px / s
+    c, r = raster.to_px((anchor + normal * offset)[None])[0]
+    org = (round(c - tw / 2), round(r + (th - baseline) / 2))
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0, 255), thick + 3, cv2.LINE_AA)
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (*CLASS_COLOR[obj.cls], 255), thick, cv2.LINE_AA)
 
 
 # -- drill-point check ----------------------------------------------------------------------------------------

@@ -16,11 +16,12 @@ import numpy as np
 import pytest
 
 from mapping.depth import AcModel, Footprint, estimate_depths, inductive_footprint
+from mapping.evaluate import depth_errors, truth_under
 from mapping.fusion import InductiveModel
-from mapping.objects import MapObject, distances_to_polyline
+from mapping.objects import MapObject
 from mapping.pipeline import MapResult, ScanData, build_map, load_scan
 from mapping.simscan import simulate_scan
-from scanner.wall import Wall, WallObject, densify, wall_from_dict
+from scanner.wall import Wall, WallObject, wall_from_dict
 
 MEAN_ERROR_M = 0.005  # what a handheld scanner's depth readout promises (±5 mm): the task's bound
 Z_MAX = 3.0  # the σ describes the errors: a Gaussian error beyond 3σ happens 3 times in 1000
@@ -70,30 +71,13 @@ def _estimate(data: ScanData, result: MapResult, samples: dict | None = None) ->
 
 
 def _truth_of(obj: MapObject, wall: Wall) -> WallObject | None:
-    """The true pipe, cable or screw the mapped object lies on (mean distance within MATCH_M)."""
-    best: tuple[float, WallObject] | None = None
-    for t in wall.objects:
-        if obj.kind == "point" and t.kind in ("screw", "nail"):
-            d = float(np.linalg.norm(obj.points_m[0] - t.points_m[0]))
-        elif obj.kind == "line" and t.kind in ("pipe", "cable"):
-            d = float(distances_to_polyline(densify(obj.points_m, 0.005), t.points_m).mean())
-        else:
-            continue
-        if best is None or d < best[0]:
-            best = (d, t)
-    return best[1] if best is not None and best[0] < MATCH_M else None
+    return truth_under(obj, wall, MATCH_M)
 
 
 def _errors(result: MapResult, wall: Wall) -> list[tuple[str, float, float]]:
-    """(true id, depth error m, reported σ m) of every mapped object with a depth that lies on a true one
-    (a spurious object is the mapping's error, not the depth's)."""
-    out = []
-    for obj in result.objects:
-        truth = _truth_of(obj, wall) if obj.depth_m is not None else None
-        if truth is not None:
-            assert obj.depth_sigma_m is not None
-            out.append((truth.id, obj.depth_m - truth.depth_m, obj.depth_sigma_m))
-    return out
+    errors = depth_errors(result.objects, wall)
+    assert all(np.isfinite(s) for _, _, s in errors)  # a depth always comes with its σ
+    return errors
 
 
 def _check(errors: list[tuple[str, float, float]]) -> None:

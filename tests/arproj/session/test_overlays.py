@@ -117,3 +117,20 @@ def test_map_is_drawn_only_inside_the_trusted_polygon():
 
     assert lit_at(1.0, 1.0) and lit_at(1.2, 1.5)   # cable and pipe inside
     assert not lit_at(1.0, 0.2) and not lit_at(2.5, 1.5)  # the same objects outside: not drawn
+
+
+def test_an_object_with_a_depth_gets_a_label_beside_its_band():
+    deep = MapObject("metal_pipe", np.array([[0.5, 1.2], [2.5, 1.2]]), 0.018, 1.0, 0.002, depth_m=0.032)
+    flat = MapObject("metal_pipe", np.array([[0.5, 1.2], [2.5, 1.2]]), 0.018, 1.0, 0.002)
+    with_label = overlays.draw_map(_wall([deep]), 0.002, show_zones=False).image
+    without = overlays.draw_map(_wall([flat]), 0.002, show_zones=False).image
+    changed = np.any(with_label != without, axis=2)
+    rows, cols = np.nonzero(changed)
+    raster = overlays.empty_raster((0.0, 0.0, 3.0, 2.5))
+    ys = raster.y1 - (rows + 0.5) / raster.px_per_m
+    xs = raster.x0 + (cols + 0.5) / raster.px_per_m
+    band = overlays.band_half_width_m(deep, 0.002)
+    # only the label differs: above the band, within a label height of it, around the pipe's middle
+    assert changed.any()
+    assert ys.min() > 1.2 + band and ys.max() < 1.2 + band + 2.2 * overlays.DEPTH_LABEL_HEIGHT_M
+    assert abs(0.5 * (xs.min() + xs.max()) - 1.5) < 0.02
