@@ -24,7 +24,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mapping.evidence import CHANNEL_SEES, SAFETY_CHANNELS, Coverage
-from mapping.mapfile import MappedObject
+from mapping.mapfile import CLASS_LABELS, MappedObject
+from mapping.objects import distances_to_polyline
+from scanner.sensor_model import points_in_polygon
 
 SAFE, KEEP_AWAY, UNKNOWN = "safe", "keep_away", "unknown"
 VERDICTS = (SAFE, KEEP_AWAY, UNKNOWN)
@@ -70,36 +72,14 @@ def band_half_width_m(obj: MappedObject, registration_sigma_m: float = 0.0) -> f
     return 0.5 * obj.width_m + safety_margin_m(obj, registration_sigma_m)
 
 
-def _distance_to_polyline(p: NDArray[np.float64], pts: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Distances (n,) from points p (n, 2) to the polyline pts (k, 2) (k = 1: a point)."""
-    if len(pts) == 1:
-        return np.linalg.norm(p - pts[0], axis=1)
-    a, b = pts[:-1], pts[1:]
-    ab = b - a
-    ap = p[:, None, :] - a[None]
-    t = np.clip(np.einsum("nkj,kj->nk", ap, ab) / np.maximum(np.einsum("kj,kj->k", ab, ab), 1e-18), 0.0, 1.0)
-    return np.min(np.linalg.norm(ap - t[..., None] * ab[None], axis=2), axis=1)
-
-
-def _inside_polygon(p: NDArray[np.float64], ring: NDArray[np.float64]) -> NDArray[np.bool_]:
-    x, y = p[:, 0], p[:, 1]
-    inside = np.zeros(len(p), bool)
-    for (x1, y1), (x2, y2) in zip(ring, np.roll(ring, -1, axis=0), strict=True):
-        crosses = (y1 > y) != (y2 > y)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x_cross = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-        inside ^= crosses & (x < x_cross)
-    return inside
-
-
 def distances_to_part(part: NDArray[np.float64], obj: MappedObject, p: ArrayLike) -> NDArray[np.float64]:
     """Distances (n,) from wall points p (n, 2) to the edge of one part of obj (0 on or inside it)."""
     q = np.asarray(p, dtype=np.float64).reshape(-1, 2)
     if obj.is_outline:
         ring = part[:-1] if len(part) > 3 and np.allclose(part[0], part[-1]) else part
-        d = _distance_to_polyline(q, np.vstack([ring, ring[:1]]))
-        return np.where(_inside_polygon(q, ring), 0.0, d)
-    return np.maximum(_distance_to_polyline(q, part) - 0.5 * obj.width_m, 0.0)
+        d = distances_to_polyline(q, np.vstack([ring, ring[:1]]))
+        return np.where(points_in_polygon(q, ring), 0.0, d)
+    return np.maximum(distances_to_polyline(q, part) - 0.5 * obj.width_m, 0.0)
 
 
 def distance_to_object_m(obj: MappedObject, xy: ArrayLike, measured: bool | None = None) -> float:
@@ -109,6 +89,10 @@ def distance_to_object_m(obj: MappedObject, xy: ArrayLike, measured: bool | None
     if not parts:
         return math.inf
     return float(min(distances_to_part(part, obj, xy)[0] for part in parts))
+
+
+def _label(obj: MappedObject) -> str:
+    return CLASS_LABELS.get(obj.cls, obj.cls.replace("_", " "))
 
 
 def check_point(xy: ArrayLike, objects: list[MappedObject], coverage: Coverage,
@@ -136,9 +120,9 @@ def check_point(xy: ArrayLike, objects: list[MappedObject], coverage: Coverage,
         return verdict(UNKNOWN, "outside the wall")
     if nearest is not None and near_c < 0:
         depth = "" if nearest.depth_m is None else f", {nearest.depth_m * 1000:.0f} mm deep"
-        return verdict(KEEP_AWAY, f"{nearest.cls.replace('_', ' ')} {near_d * 1000:.0f} mm away{depth}")
+        return verdict(KEEP_AWAY, f"{_label(nearest)} {near_d * 1000:.0f} mm away{depth}")
     if inferred_hit is not None:
-        return verdict(UNKNOWN, f"inferred only: a {inferred_hit.cls.replace('_', ' ')} may run here; it was "
+        return verdict(UNKNOWN, f"inferred only: a {_label(inferred_hit)} may run here; it was "
                                 "joined across unmeasured ground, not measured")
     radius = drill_radius_m + BASE_SAFETY_MARGIN_M + Z95 * registration_sigma_m
     rows, cols, whole = coverage.cells_within(p, radius)
@@ -160,7 +144,7 @@ def check_point(xy: ArrayLike, objects: list[MappedObject], coverage: Coverage,
             return verdict(UNKNOWN, f"unexplained {channel} response: something is there that the map does not "
                                     "name")
     where = "no mapped object" if nearest is None else \
-        f"{near_d * 1000:.0f} mm from the nearest {nearest.cls.replace('_', ' ')}"
+        f"{near_d * 1000:.0f} mm from the nearest {_label(nearest)}"
     return verdict(SAFE, f"scanned, nothing found ({where})")
 
 

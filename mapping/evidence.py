@@ -117,7 +117,7 @@ _FIT_STRIDE = 2  # the fit uses every 2nd cell each way (the signal is smooth ov
 # capacitively, and only live cables and metal coupled to them show in AC.
 _CHANNEL_SEES_CLASS = {"inductive": ("power_line", "metal_pipe", "metal", "fastener"),
                        "ac": ("power_line", "metal_pipe", "metal"),
-                       "capacitive": ("power_line", "metal_pipe", "metal", "wood", "cavity")}
+                       "capacitive": ("power_line", "metal_pipe", "metal", "non_metal", "cavity")}
 
 
 def _footprint_sigma(channel: str, cls: str, depth_m: float) -> float:
@@ -131,17 +131,18 @@ def _footprint_sigma(channel: str, cls: str, depth_m: float) -> float:
 
 def _distance_field(obj: MapObject, xs: NDArray[np.float64], ys: NDArray[np.float64]) -> NDArray[np.float64]:
     """Distances (len(ys), len(xs)) from cell centres to the object's centre line, point or outline (0 inside)."""
-    from mapping.drill import _distance_to_polyline, _inside_polygon
+    from mapping.objects import distances_to_polyline
+    from scanner.sensor_model import points_in_polygon
 
     gx, gy = np.meshgrid(xs, ys)
     p = np.column_stack([gx.ravel(), gy.ravel()])
     pts = np.asarray(obj.points_m, dtype=np.float64)
     if obj.kind == "outline" and len(pts) >= 3:
         ring = pts[:-1] if np.allclose(pts[0], pts[-1]) else pts
-        d = _distance_to_polyline(p, np.vstack([ring, ring[:1]]))
-        d = np.where(_inside_polygon(p, ring), 0.0, d)
+        d = distances_to_polyline(p, np.vstack([ring, ring[:1]]))
+        d = np.where(points_in_polygon(p, ring), 0.0, d)
     else:  # a pipe's own width (≤ 3 cm) is small beside the footprint: the kernel widths absorb it
-        d = _distance_to_polyline(p, pts)
+        d = distances_to_polyline(p, pts)
     return d.reshape(len(ys), len(xs))
 
 
@@ -417,7 +418,7 @@ def regions(mask: NDArray[np.bool_], info: GridInfo, simplify_m: float = 0.003) 
 
 # Channels that see each class: a stretch one of them covered was measured (scanner/sensor_model.py).
 CLASS_CHANNELS = {"power_line": ("inductive", "ac"), "metal_pipe": ("inductive",), "metal": ("inductive",),
-                  "fastener": ("inductive",), "wood": ("capacitive",), "cavity": ("capacitive",)}
+                  "fastener": ("inductive",), "non_metal": ("capacitive",), "cavity": ("capacitive",)}
 _STRETCH_STEP_M = 0.002  # lines are cut where their evidence changes, to this resolution
 
 

@@ -7,7 +7,7 @@ wall.glb (what the projection session loads)
     when range images were merged). Faces are wound counter-clockwise seen from the room (+z).
     Texture coordinates: u = (x − x_min)/(x_max − x_min), v = (y − y_min)/(y_max − y_min) over the map's
     bounds (trimesh convention, v = 0 at the image's bottom row). The texture is an RGBA PNG of the in-wall
-    map (mapping.texture): class colours (power_line red, metal_pipe blue, metal purple, wood brown, cavity
+    map (mapping.texture): class colours (power_line red, metal_pipe blue, metal purple, non_metal brown, cavity
     teal, fastener yellow); scanned areas where nothing was found faint grey (alpha 24); alpha 0 exactly
     where the wall was not scanned (the projection session reads coverage from the alpha).
     The glTF scene's `extras` carry {"frame": "wall", "units": "m", "bounds_m": [x_min, y_min, x_max, y_max]}.
@@ -119,8 +119,8 @@ def write_map_png(result: MapResult, path: str | Path, title: str = "") -> Path:
                 p = np.vstack([p, p[:1]]) if o.is_outline else p
                 ax.plot(p[:, 0], p[:, 1], style, color=colour, lw=2.5 if o.shape == "line" else 1.5)
                 any_inferred |= not measured
-    handles = [Line2D([0], [0], color=np.array(CLASS_COLOURS[c]) / 255.0, lw=3, label=c.replace("_", " "))
-               for c in CLASSES if c in used]
+    handles = [Line2D([0], [0], color=np.array(CLASS_COLOURS[c]) / 255.0, lw=3,
+                      label=mapfile.CLASS_LABELS.get(c, c.replace("_", " "))) for c in CLASSES if c in used]
     if any_inferred:
         handles.append(Line2D([0], [0], color="black", lw=2, ls="--", label="inferred, not measured"))
     handles.append(Line2D([0], [0], color=(1.0, 0.85, 0.85), lw=8, label="not scanned"))
@@ -223,7 +223,7 @@ def write_dxf(objects: list[mapfile.MappedObject], path: str | Path) -> Path:
     path = Path(path)
     doc = ezdxf.new(units=ezdxf.units.MM, setup=True)
     msp = doc.modelspace()
-    aci = {"power_line": 1, "metal_pipe": 5, "metal": 6, "wood": 30, "cavity": 4, "fastener": 2}
+    aci = {"power_line": 1, "metal_pipe": 5, "metal": 6, "non_metal": 30, "cavity": 4, "fastener": 2}
     for cls in CLASSES:
         doc.layers.add(cls.upper(), color=aci.get(cls, 7))
         doc.layers.add(f"{cls.upper()}_INFERRED", color=aci.get(cls, 7), linetype="DASHED")

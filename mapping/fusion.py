@@ -5,17 +5,24 @@ What each channel sees (GMS120-class scanner):
     so a pipe near a cable shows in the AC map as a broad, low ridge without a sharp crest;
   * inductive: any metal — pipes, plates, screws, nails, and the copper of power lines (a weaker, narrower
     peak than a pipe's);
-  * capacitive: wood (studs, beams) and water as a raised level, cavities as a lowered one.
+  * capacitive: wood (studs, beams) and water as a raised level, cavities as a lowered one. It cannot tell
+    a wooden stud from a water-filled plastic pipe, and metal raises it too.
 
-Per detected object we measure, along its centre line, the height of each channel's signal over its
-background in robust standard deviations (z) and the AC crest's sharpness (the AC height on the line relative
-to the AC level 2.5 cm to either side). Logistic evidence functions turn them into class probabilities:
+Per detected object we measure the height of each channel's signal over its background in robust standard
+deviations (z): along a line's centre line, or over the cells inside an outline; for lines also the AC
+crest's sharpness (the AC height on the line relative to the AC level 2.5 cm to either side). Logistic
+evidence functions turn them into class probabilities:
     power_line  AC crest high and sharp (with or without an inductive peak)
     metal_pipe  inductive ridge, AC without a sharp crest, wider than a cable
-    metal       metal for sure but not which (short ridge, plates, ambiguous widths)
+    metal       metal for sure but not which (short ridge, plates, steel studs, ambiguous widths)
     fastener    small round inductive peak
-    wood / cavity  raised / lowered capacitive regions
-The confidence is the winning class's probability.
+    non_metal   raised capacitive level where the inductive channel looked and found no metal: a wooden
+                stud or a water-filled plastic pipe (the capacitive channel cannot tell which)
+    cavity      lowered capacitive region
+beside a "nothing here" alternative: no channel supports any class. The confidence is the named class's
+probability among all alternatives, "nothing here" included; where "nothing here" is the likeliest, the
+class is "unknown" and the confidence that of the likeliest class (below one half). Nothing is called
+non-metal without an inductive channel, and nothing metal without one.
 """
 
 from __future__ import annotations
@@ -26,11 +33,18 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
+from scipy.special import expit
 
 from mapping.grid import GridInfo, WallGrid
 from mapping.objects import MapObject, normalise
+from scanner.sensor_model import points_in_polygon
 
-CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "wood", "cavity", "fastener")
+CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "non_metal", "cavity", "fastener")
+METAL_CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "fastener")  # what the inductive sensor sees
+UNKNOWN = "unknown"  # no class is better supported than "nothing here"
+# Channels whose objects lower the level as well as raise it (cavities lower the capacitive one): their
+# background is estimated two-sided (mapping.objects.background_level)
+TWO_SIDED_CHANNELS: tuple[str, ...] = ("capacitive",)
 
 
 @dataclass(frozen=True)
@@ -45,6 +59,9 @@ class FusionParams:
     # are ~0.1, pipes 0.5–2, areas of sheet metal (plates, steel studs) seen as a ridge ≫ 2.
     cable_max_ratio: float = 0.48
     area_min_ratio: float = 8.0
+    # capacitive height (raised or lowered) that says "wood, water or a cavity": 4 σ, the level beyond which the
+    # evidence layer (mapping.evidence.UNEXPLAINED_SIGMAS) calls a response something
+    capacitive_min_z: float = 4.0
     softness: float = 0.15  # relative width of the logistic transitions
 
 
@@ -97,7 +114,7 @@ def _raw(display: NDArray[np.float64] | float) -> NDArray[np.float64]:
 
 
 def _sigmoid(x: NDArray[np.float64] | float) -> NDArray[np.float64] | float:
-    return 1.0 / (1.0 + np.exp(-np.asarray(x, dtype=np.float64)))
+    return expit(np.asarray(x, dtype=np.float64))  # 1 / (1 + exp(−x)), without overflow far from the step
 
 
 def _sample(z: NDArray[np.float64], info: GridInfo, xy: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -135,13 +152,19 @@ class Fuser:
         self.background: dict[str, float] = {}
         for s in grid.sensors:
             self.signal[s] = grid.signal(s)
-            self.z[s], self.background[s], _ = normalise(self.signal[s])
+            self.z[s], self.background[s], _ = normalise(self.signal[s], s in TWO_SIDED_CHANNELS)
 
     def features(self, obj: MapObject) -> dict[str, float]:
         p = self.params
         info = self.grid.info
-        pts, normals = _densify(obj.points_m, 0.005) if obj.kind == "line" else (obj.points_m, None)
         f: dict[str, float] = {"length_m": obj.length_m(), "width_m": obj.width_m}
+        if obj.kind == "outline":
+            # the region's interior, not its ring: the ring is the half-maximum edge (or the object's own edge),
+            # where each channel shows a fraction of what the region holds
+            for s, z in self.z.items():
+                f[f"{s}_z"] = self._median_inside(s, z, obj.points_m)
+            return f
+        pts, normals = _densify(obj.points_m, 0.005) if obj.kind == "line" else (obj.points_m, None)
         for s, z in self.z.items():
             f[f"{s}_z"] = float(np.median(_sample(z, info, pts)))
         if "ac" in self.z and normals is not None:
@@ -161,53 +184,88 @@ class Fuser:
             f["strength_ratio"] = amp / self.inductive.pipe_peak_raw(depth, main)
         return f
 
+    def _median_inside(self, sensor: str, z: NDArray[np.float64], ring: NDArray[np.float64]) -> float:
+        """Median z of the channel over the known cells whose centres lie inside the ring (k, 2); a ring too
+        small to hold a cell centre is sampled at its centroid."""
+        info = self.grid.info
+        ring = np.asarray(ring, dtype=np.float64)
+        ring = ring[:-1] if len(ring) > 3 and np.allclose(ring[0], ring[-1]) else ring
+        xs, ys = info.cell_centres()
+        lo, hi = ring.min(axis=0), ring.max(axis=0)
+        ci = np.flatnonzero((xs >= lo[0]) & (xs <= hi[0]))
+        ri = np.flatnonzero((ys >= lo[1]) & (ys <= hi[1]))
+        if ci.size and ri.size:
+            cc, rr = np.meshgrid(ci, ri)
+            inside = points_in_polygon(np.column_stack([xs[cc.ravel()], ys[rr.ravel()]]), ring)
+            rows, cols = rr.ravel()[inside], cc.ravel()[inside]
+            known = np.isfinite(self.signal[sensor][rows, cols])
+            if known.any():
+                return float(np.median(z[rows[known], cols[known]]))
+        return float(_sample(z, info, ring.mean(axis=0, keepdims=True))[0])
+
     def classify(self, obj: MapObject) -> MapObject:
-        """Fills obj.cls, obj.confidence and obj.features; returns obj."""
+        """Fills obj.cls, obj.confidence and obj.features (with p_<class> and p_nothing); returns obj."""
         p = self.params
         f = self.features(obj)
         obj.features.update(f)
         s = p.softness
+        looked_for_metal = "inductive" in self.z
         ind = f.get("inductive_z", 0.0)
-        metal = float(_sigmoid((ind - p.metal_min_z) / (s * p.metal_min_z)))
+        metal = float(_sigmoid((ind - p.metal_min_z) / (s * p.metal_min_z))) if looked_for_metal else 0.0
+        cap = f.get("capacitive_z", 0.0)
+        seen_cap = "capacitive_z" in f
+        raised = float(_sigmoid((cap - p.capacitive_min_z) / (s * p.capacitive_min_z))) if seen_cap else 0.0
+        lowered = float(_sigmoid((-cap - p.capacitive_min_z) / (s * p.capacitive_min_z))) if seen_cap else 0.0
+        # "not metal" is a claim only the inductive channel can make (metal raises the capacitive level too)
+        no_metal = (1.0 - metal) if looked_for_metal else 0.0
         if obj.kind == "point":
-            obj.cls, obj.confidence = "fastener", metal
-            return obj
-        if obj.kind == "outline":
-            cap = f.get("capacitive_z", 0.0)
-            if obj.features.get("polarity", 1.0) > 0 and ind > p.metal_min_z:
-                obj.cls, obj.confidence = "metal", metal
-            elif cap >= 0:
-                obj.cls, obj.confidence = "wood", float(_sigmoid((cap - 8.0) / (s * 8.0)))
-            else:
-                obj.cls, obj.confidence = "cavity", float(_sigmoid((-cap - 8.0) / (s * 8.0)))
-            return obj
-        ac = f.get("ac_z", 0.0)
-        sharp = f.get("ac_sharpness", 0.0)
-        live = float(_sigmoid((ac - p.ac_crest_z) / (s * p.ac_crest_z)) * _sigmoid((sharp - p.ac_sharpness) / 0.05))
-        log_ratio = float(np.log(max(f.get("strength_ratio", 1.0), 1e-6)))
-        copper_cable = float(_sigmoid((np.log(p.cable_max_ratio) - log_ratio) / 0.3))
-        sheet = float(_sigmoid((log_ratio - np.log(p.area_min_ratio)) / 0.3))
-        scores = {
-            "power_line": live + (1 - live) * metal * copper_cable,
-            "metal_pipe": (1 - live) * metal * (1 - copper_cable) * (1 - sheet),
-            "metal": (1 - live) * metal * sheet,
-        }
-        obj.cls = max(scores, key=scores.get)  # type: ignore[arg-type]
-        total = sum(scores.values())
-        obj.confidence = float(scores[obj.cls] / total) if total > 1e-9 else 0.0
-        return obj
+            scores = {"fastener": metal}
+        elif obj.kind == "outline" and obj.features.get("polarity", 1.0) < 0:
+            scores = {"cavity": lowered}  # a lowered level: metal, wood and water all raise it
+        elif obj.kind == "outline":
+            scores = {"metal": metal, "non_metal": no_metal * raised}
+        else:
+            ac = f.get("ac_z", 0.0)
+            sharp = f.get("ac_sharpness", 0.0)
+            live = float(_sigmoid((ac - p.ac_crest_z) / (s * p.ac_crest_z))
+                         * _sigmoid((sharp - p.ac_sharpness) / 0.05))
+            log_ratio = float(np.log(max(f.get("strength_ratio", 1.0), 1e-6)))
+            copper_cable = float(_sigmoid((np.log(p.cable_max_ratio) - log_ratio) / 0.3))
+            sheet = float(_sigmoid((log_ratio - np.log(p.area_min_ratio)) / 0.3))
+            scores = {
+                "power_line": live + (1 - live) * metal * copper_cable,
+                "metal_pipe": (1 - live) * metal * (1 - copper_cable) * (1 - sheet),
+                "metal": (1 - live) * metal * sheet,
+                "non_metal": (1 - live) * no_metal * raised,
+            }
+        return _decide(obj, scores)
+
+
+def _decide(obj: MapObject, scores: dict[str, float]) -> MapObject:
+    """The likeliest class beside "nothing here" (the complement of the classes' evidence, ≥ 0)."""
+    nothing = max(1.0 - sum(scores.values()), 0.0)
+    total = sum(scores.values()) + nothing
+    probs = {c: v / total for c, v in scores.items()} if total > 1e-12 else dict.fromkeys(scores, 0.0)
+    best = max(probs, key=probs.get)  # type: ignore[arg-type]
+    p_nothing = nothing / total if total > 1e-12 else 1.0
+    obj.features.update({f"p_{c}": v for c, v in probs.items()})
+    obj.features["p_nothing"] = p_nothing
+    obj.cls = best if probs[best] >= p_nothing else UNKNOWN
+    obj.confidence = float(probs[best])
+    return obj
 
 
 def class_map(grid: WallGrid, threshold: float = 0.7) -> tuple[NDArray[np.int16], NDArray[np.float64]]:
     """Per-cell class from the log-odds layers: (index into CLASSES or −1, its probability).
 
-    AC occupancy → power_line, inductive → metal, capacitive above → wood. Objects, not cells, carry the
-    finer classes; this map is the background of the texture.
+    AC occupancy → power_line, inductive → metal, capacitive above → non_metal (metal raises the capacitive
+    level too: inductive wins). Objects, not cells, carry the finer classes; this map is the background of
+    the texture.
     """
     shape = grid.info.shape
     idx = np.full(shape, -1, np.int16)
     prob = np.zeros(shape)
-    order = [("capacitive", "wood"), ("inductive", "metal"), ("ac", "power_line")]  # later wins
+    order = [("capacitive", "non_metal"), ("inductive", "metal"), ("ac", "power_line")]  # later wins
     for sensor, cls in order:
         if sensor not in grid.models:
             continue

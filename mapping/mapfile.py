@@ -29,8 +29,15 @@ from geometry.errors import InputError
 
 FORMAT = "arproj-objects/2"
 FILE_NAME = "objects.json"
-MAP_CLASSES = ("power_line", "metal_pipe", "metal", "fastener", "wood", "cavity")
-OUTLINE_CLASSES = ("wood", "cavity")
+MAP_CLASSES = ("power_line", "metal_pipe", "metal", "fastener", "non_metal", "cavity")
+# Classes drawn as closed outlines when a file does not say (format 1): a non-metal object (a wooden stud, or a
+# water-filled plastic pipe: the capacitive channel cannot tell which) is an outline only when its points close
+# a ring, else a line.
+OUTLINE_CLASSES = ("non_metal", "cavity")
+CLASS_ALIASES = {"wood": "non_metal"}  # names of earlier versions: "wood" was every raised capacitive region
+# What a class claims, in words (legends, labels): only what the channels can tell
+CLASS_LABELS = {"power_line": "power line", "metal_pipe": "metal pipe", "metal": "metal", "fastener": "fastener",
+                "non_metal": "non-metal: stud or water pipe", "cavity": "cavity"}
 SHAPES = ("line", "point", "outline")
 DEFAULT_SIGMA_M = 0.003  # position σ of a mapped object when objects.json gives none (mapping's target)
 MIN_CONFIDENCE_FOR_SIGMA = 0.25  # σ grows as 1/confidence, down to this confidence
@@ -57,7 +64,8 @@ class MappedObject:
         self.points_m = np.asarray(self.points_m, dtype=np.float64).reshape(-1, 2)
         if self.shape is None:
             self.shape = ("point" if len(self.points_m) == 1 else
-                          "outline" if self.cls in OUTLINE_CLASSES and len(self.points_m) >= 3 else "line")
+                          "outline" if self.cls in OUTLINE_CLASSES and _is_ring(self.cls, self.points_m) else
+                          "line")
 
     @property
     def is_outline(self) -> bool:
@@ -106,6 +114,14 @@ class MappedObject:
                 "measured": [bool(m) for m in self.measured_segments()]}
 
 
+def _is_ring(cls: str, points: NDArray[np.float64]) -> bool:
+    """Whether points (k, 2) of an outline class without a stated shape are an outline: a cavity with three
+    or more points; a non-metal object when they also close (first point = last)."""
+    if len(points) < 3:
+        return False
+    return cls != "non_metal" or bool(len(points) >= 4 and np.allclose(points[0], points[-1]))
+
+
 def _finite_number(where: str, key: str, value: object, lo: float, hi: float, optional: bool = False) -> float | None:
     if value is None and optional:
         return None
@@ -121,6 +137,11 @@ def parse_object(item: object, where: str) -> MappedObject:
     if not isinstance(item, dict):
         raise InputError(f"{where} is not an object")
     cls = item.get("class")
+    alias = CLASS_ALIASES.get(cls) if isinstance(cls, str) else None
+    if alias is not None and item.get("kind") is None and isinstance(item.get("points_m"), list) \
+            and len(item["points_m"]) >= 3:
+        item = {**item, "kind": "outline"}  # a "wood" object was always a stud's or a beam's outline
+    cls = alias or cls
     if cls not in MAP_CLASSES:
         raise InputError(f"{where}: class {cls!r} is unknown", f"use one of {', '.join(MAP_CLASSES)}")
     raw_points = item.get("points_m")

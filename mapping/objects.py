@@ -64,25 +64,53 @@ class RidgePoints:
     pixel: NDArray[np.int64]  # (n, 2) (row, col) of the cell each point came from
 
 
-def background_level(values: NDArray[np.float64]) -> tuple[float, float]:
+CLIP_SIGMAS = 3.0  # two-sided background: values this many σ from the level are objects
+TWO_SIDED_RATIO = 2.0  # ... and the mode's spread replaces the lower quantiles' when this much narrower
+_CLIP_ROUNDS = 10
+
+
+def background_level(values: NDArray[np.float64], two_sided: bool = False) -> tuple[float, float]:
     """(level, σ) of the empty-wall background among finite values, robust even when objects cover most of
     the area: from the lower quantiles only (for Gaussian noise q25 − q05 = 0.971 σ, median = q25 + 0.674 σ).
-    Valid while at least a quarter of the cells are background."""
+    Valid while at least a quarter of the cells are background.
+
+    two_sided: objects may also lower the level (the capacitive map: cavities), so the lowest values need not
+    be background. The mode is then estimated too — median and interquartile range of the values within
+    CLIP_SIGMAS of the level, iterated from the median (valid while most cells are background) — and taken
+    where the lower quantiles are at least TWO_SIDED_RATIO times as wide: lowered objects in them. Otherwise
+    the one-sided estimate stands (it holds with objects over up to three quarters of the wall)."""
     v = np.asarray(values, dtype=np.float64)
     v = v[np.isfinite(v)]
     if v.size == 0:
         return 0.0, 1.0
     q05, q25, q99 = np.percentile(v, [5, 25, 99.9])
-    sigma = max((q25 - q05) / 0.971, 1e-9, 1e-3 * float(q99 - q05))
-    return float(q25 + 0.674 * sigma), float(sigma)
+    floor = max(1e-9, 1e-3 * float(q99 - q05))
+    sigma = max((q25 - q05) / 0.971, floor)
+    level = float(q25 + 0.674 * sigma)
+    if not two_sided:
+        return level, float(sigma)
+    mode = float(np.median(v))
+    spread = max(1.4826 * float(np.median(np.abs(v - mode))), floor)
+    for _ in range(_CLIP_ROUNDS):
+        near = v[np.abs(v - mode) <= CLIP_SIGMAS * spread]
+        if near.size < 10:
+            break
+        lo, mid, hi = np.percentile(near, [25, 50, 75])
+        new_mode, new_spread = float(mid), max(float(hi - lo) / 1.349, floor)
+        if abs(new_mode - mode) <= 1e-3 * spread and abs(new_spread - spread) <= 1e-3 * spread:
+            mode, spread = new_mode, new_spread
+            break
+        mode, spread = new_mode, new_spread
+    return (mode, spread) if TWO_SIDED_RATIO * spread < sigma else (level, float(sigma))
 
 
-def normalise(signal: NDArray[np.float64]) -> tuple[NDArray[np.float64], float, float]:
-    """(z-scores with NaN→0, background level, background σ) of a signal map with NaN unknown."""
+def normalise(signal: NDArray[np.float64], two_sided: bool = False) -> tuple[NDArray[np.float64], float, float]:
+    """(z-scores with NaN→0, background level, background σ) of a signal map with NaN unknown (two_sided: see
+    background_level)."""
     known = np.isfinite(signal)
     if not known.any():
         return np.zeros(signal.shape), 0.0, 1.0
-    level, sigma = background_level(signal[known])
+    level, sigma = background_level(signal[known], two_sided)
     z = np.where(known, (signal - level) / sigma, 0.0)
     return z, level, sigma
 
@@ -105,12 +133,13 @@ def _smooth_derivatives(z: NDArray[np.float64], known: NDArray[np.bool_], sigma_
 
 
 def ridge_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 0.006,
-                 min_strength: float = 6.0, polarity: float = 1.0) -> RidgePoints:
+                 min_strength: float = 6.0, polarity: float = 1.0, two_sided: bool = False) -> RidgePoints:
     """Steger ridge points of a signal map (height, width), NaN unknown; polarity −1 finds valleys.
 
-    min_strength: smoothed height over the background in robust standard deviations.
+    min_strength: smoothed height over the background in robust standard deviations (two_sided: objects
+    raise and lower the map, see background_level).
     """
-    z, _, _ = normalise(signal)
+    z, _, _ = normalise(signal, two_sided)
     z = polarity * z
     known = np.isfinite(signal)
     sigma_px = sigma_m / info.resolution
@@ -409,9 +438,10 @@ def _try_join(p: NDArray[np.float64], q: NDArray[np.float64], allow_bend: bool,
 
 
 def extract_lines(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 0.006,
-                  min_strength: float = 6.0) -> list[MapObject]:
-    """Pipes/cables (any straight, bent or diagonal run) in one signal map as 'line' MapObjects."""
-    r = ridge_points(signal, info, sigma_m, min_strength)
+                  min_strength: float = 6.0, two_sided: bool = False) -> list[MapObject]:
+    """Pipes/cables (any straight, bent or diagonal run) in one signal map as 'line' MapObjects (two_sided:
+    objects raise and lower the map, see background_level)."""
+    r = ridge_points(signal, info, sigma_m, min_strength, two_sided=two_sided)
     polys, widths, strengths = [], [], []
     todo = [g for g in _chains(r) if g.size >= tol.RIDGE_MIN_POINTS]
     rounds = 0
@@ -470,15 +500,16 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
 
 def extract_regions(signal: NDArray[np.float64], info: GridInfo, polarity: float, min_strength: float = 4.0,
                     min_area_m2: float = 0.004, min_width_m: float = 0.03, sigma_m: float = 0.006,
-                    exclude: NDArray[np.bool_] | None = None) -> list[MapObject]:
+                    exclude: NDArray[np.bool_] | None = None, two_sided: bool = False) -> list[MapObject]:
     """Wide regions (studs, plates: polarity +1; cavities: −1) as 'outline' MapObjects (closed rings).
 
     Regions narrower than min_width_m are removed by a morphological opening (lines are not areas);
-    exclude (height, width) masks cells already explained (e.g. around detected pipes and cables).
+    exclude (height, width) masks cells already explained (e.g. around detected pipes and cables);
+    two_sided: objects raise and lower the map (see background_level).
     """
     import cv2
 
-    z, _, _ = normalise(signal)
+    z, _, _ = normalise(signal, two_sided)
     known = np.isfinite(signal)
     s, *_rest, w = _smooth_derivatives(polarity * z, known, sigma_m / info.resolution)
     mask = (s >= min_strength) & (w > 0.5)

@@ -20,7 +20,7 @@ from geometry.errors import InputError
 from mapping import tolerances as tol
 from mapping.depth import AcModel, estimate_depths
 from mapping.evidence import Coverage, coverage_radii, mapped_objects, sample_noise
-from mapping.fusion import Fuser, FusionParams, InductiveModel
+from mapping.fusion import METAL_CLASSES, TWO_SIDED_CHANNELS, UNKNOWN, Fuser, FusionParams, InductiveModel
 from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid
 from mapping.mapfile import MappedObject
 from mapping.objects import (
@@ -36,6 +36,7 @@ from scanner.log import DamagedLogError, ScanLog
 
 STITCH_ROUNDS = 2  # feature pairing + alignment rounds (the second re-pairs and re-linearises)
 SPARSE_COVERAGE = 0.6  # below this fraction of the wall's cells observed, lines come from the passes' peaks
+CAP_TWO_SIDED = "capacitive" in TWO_SIDED_CHANNELS  # cavities lower the capacitive map: two-sided background
 
 
 @dataclass
@@ -288,7 +289,14 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
                     sparse_data: ScanData | None = None, xy: NDArray[np.float64] | None = None,
                     lag_m: float = 0.0) -> list[MapObject]:
     """Lines from the inductive and AC maps (merged where they coincide) — or, for a sparse scan
-    (sparse_data given), from the passes' peaks — then fasteners, studs and cavities, all classified."""
+    (sparse_data given), from the passes' peaks — then fasteners, non-metal lines (raised capacitive ridges no
+    metal explains: water-filled plastic pipes), studs and cavities, all classified.
+
+    A class says only what its channels can tell: what the inductive or AC map found is metal (if fusion
+    cannot tell which, "metal"); what only the capacitive map shows is "non_metal" or "cavity", never a pipe
+    or metal; a capacitive object fusion cannot name is left to the evidence layer (an unexplained response).
+    A non-metal ridge is a line unless fasteners sit on its centre line (a stud: its outline is drawn), so a
+    water pipe is one line, never pieces of area."""
     from mapping.sparse import lines_from_passes
 
     settings = settings or MapSettings()
@@ -313,29 +321,104 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
     if "inductive" in grid.models:
         points = extract_points(grid.signal("inductive"), grid.info, min_strength=settings.point_min_strength)
         points = drop_points_on_lines(points, lines)
+    non_metal: list[MapObject] = []
+    if "capacitive" in grid.models and "inductive" in grid.models and sparse_data is None:
+        non_metal = _non_metal_lines(grid, fuser, lines, points)
     regions: list[MapObject] = []
-    explained = np.zeros(grid.info.shape, bool)
+    near_metal_lines = np.zeros(grid.info.shape, bool)
     for ln in lines:
-        explained |= near_lines([ln], grid.info, max(0.04, 1.5 * ln.width_m))
+        near_metal_lines |= near_lines([ln], grid.info, max(0.04, 1.5 * ln.width_m))
+    explained = near_metal_lines.copy()
     if points:
         explained |= near_lines([MapObject("line", np.repeat(p.points_m, 2, axis=0), 0.0) for p in points],
                                 grid.info, 0.04)
+    metal_regions: list[MapObject] = []
     if "inductive" in grid.models:  # metal areas: plates, steel studs
-        regions += extract_regions(grid.signal("inductive"), grid.info, +1.0, min_strength=10.0,
-                                   min_width_m=0.04, min_area_m2=0.003, exclude=explained)
-    if "capacitive" in grid.models:  # wood (raised) and cavities (lowered)
+        metal_regions = extract_regions(grid.signal("inductive"), grid.info, +1.0, min_strength=10.0,
+                                        min_width_m=0.04, min_area_m2=0.003, exclude=explained)
+    if "capacitive" in grid.models:  # studs (raised) and cavities (lowered)
         cap = grid.signal("capacitive")
-        metal = near_lines(regions, grid.info, 0.02) if regions else np.zeros(grid.info.shape, bool)
+        # Fasteners do not show capacitively (too small): only lines explain the capacitive map — metal ones
+        # (their capacitive echo) and the non-metal ones found above
+        by_lines = near_metal_lines.copy()
+        for ln in non_metal:
+            by_lines |= near_lines([ln], grid.info, max(0.04, ln.width_m))
+        metal = near_lines(metal_regions, grid.info, 0.02) if metal_regions else np.zeros(grid.info.shape, bool)
         regions += extract_regions(cap, grid.info, +1.0, min_strength=8.0, min_area_m2=0.006,
-                                   exclude=explained | metal)
-        regions += extract_regions(cap, grid.info, -1.0, min_strength=8.0, min_area_m2=0.006, exclude=explained)
+                                   exclude=by_lines | metal, two_sided=CAP_TWO_SIDED)
+        regions += extract_regions(cap, grid.info, -1.0, min_strength=8.0, min_area_m2=0.006,
+                                   exclude=near_metal_lines, two_sided=CAP_TWO_SIDED)
     if sparse_data is not None:
-        regions = []  # the grid is too patchy for areas; the passes' lines are classified already
-        objects = lines + [fuser.classify(o) for o in points]
+        # the grid is too patchy for areas; the passes' lines are classified already
+        metal_found = lines + [_metal_named(fuser.classify(o)) for o in points]
+        capacitive: list[MapObject] = []
     else:
-        objects = [fuser.classify(o) for o in lines + points + regions]
-    return [_as_outline(o) if o.kind == "line" and o.cls == "metal" and len(o.points_m) == 2 else o
-            for o in objects]
+        metal_found = [_metal_named(fuser.classify(o)) for o in lines + points + metal_regions]
+        capacitive = [o for o in (fuser.classify(r) for r in regions) if o.cls != UNKNOWN]
+    # a straight ridge of sheet metal (fusion's "metal", not a ridge merely named metal by its channel)
+    metal_found = [_as_outline(o) if o.kind == "line" and o.cls == "metal" and len(o.points_m) == 2
+                   and not o.features.get(NAMED_BY_CHANNEL) else o for o in metal_found]
+    return metal_found + non_metal + capacitive
+
+
+NON_METAL_LINE_MIN_STRENGTH = 8.0  # capacitive ridge height (robust σ) for a non-metal line, as for its regions
+NON_METAL_LINE_MAX_WIDTH_M = 0.12  # wider ridges are areas: a line's capacitive footprint at 5 cm is < 10 cm
+DUPLICATE_RADIUS_M = 0.02  # a capacitive ridge this close along a metal line is that line's capacitive echo
+NAMED_BY_CHANNEL = "metal_by_channel"  # feature flag: the class is the finding channel's, fusion could not tell
+STUD_FASTENERS = 2  # this many fasteners on a non-metal ridge's centre line: a stud the board is fixed to
+
+
+def _non_metal_lines(grid: WallGrid, fuser: Fuser, metal_lines: list[MapObject],
+                     points: list[MapObject]) -> list[MapObject]:
+    """Raised capacitive ridges that no metal line explains and where the inductive channel finds no metal,
+    classified (non_metal): water-filled plastic pipes, or studs whose fasteners are not in view (the
+    capacitive channel cannot tell the two apart; only the shape differs). A straight ridge with fasteners
+    on its centre line is a stud: it is left to the outlines (extract_regions)."""
+    found = extract_lines(grid.signal("capacitive"), grid.info, min_strength=NON_METAL_LINE_MIN_STRENGTH,
+                          two_sided=CAP_TWO_SIDED)
+    fasteners = np.array([p.points_m[0] for p in points]).reshape(-1, 2)
+    out = []
+    for ridge in found:
+        if ridge.width_m > NON_METAL_LINE_MAX_WIDTH_M:
+            continue
+        for piece in _without_duplicate_parts(ridge, metal_lines, DUPLICATE_RADIUS_M):
+            fuser.classify(piece)
+            if piece.cls != "non_metal":
+                continue  # metal's capacitive echo (the inductive map names it), or too weak to name
+            if _is_stud(piece, fasteners):
+                continue
+            out.append(piece)
+    return out
+
+
+def _is_stud(line: MapObject, fasteners: NDArray[np.float64]) -> bool:
+    """A straight non-metal ridge with STUD_FASTENERS or more fasteners on its centre line (within a quarter
+    of its width): the boards' screws or nails, driven into a stud."""
+    from mapping.objects import distances_to_polyline
+
+    p = line.points_m
+    chord = p[-1] - p[0]
+    length = float(np.linalg.norm(chord))
+    if len(fasteners) < STUD_FASTENERS or length < 1e-9:
+        return False
+    rel = p - p[0]
+    bend = float(np.max(np.abs(chord[0] * rel[:, 1] - chord[1] * rel[:, 0])) / length)
+    if bend > 0.25 * line.width_m:
+        return False  # bent: a pipe, never a stud
+    on_line = distances_to_polyline(fasteners, p[[0, -1]]) <= max(0.25 * line.width_m, 0.01)
+    return int(on_line.sum()) >= STUD_FASTENERS
+
+
+def _metal_named(obj: MapObject) -> MapObject:
+    """An object the inductive or AC map found is metal (that is all those channels see): where fusion could
+    not name its class ("unknown", or non-metal on a weak inductive ridge), it is "metal" ("fastener" for a
+    point) with the probability fusion gave the metal classes together."""
+    if obj.cls in METAL_CLASSES:
+        return obj
+    cls = "fastener" if obj.kind == "point" else "metal"
+    obj.cls, obj.confidence = cls, float(sum(obj.features.get(f"p_{c}", 0.0) for c in METAL_CLASSES))
+    obj.features[NAMED_BY_CHANNEL] = 1.0
+    return obj
 
 
 def _as_outline(obj: MapObject) -> MapObject:

@@ -26,7 +26,7 @@ CLASS_COLOURS: dict[str, tuple[int, int, int]] = {
     "power_line": (230, 30, 30),
     "metal_pipe": (30, 90, 230),
     "metal": (150, 60, 200),
-    "wood": (190, 130, 50),
+    "non_metal": (190, 130, 50),  # a wooden stud or a water-filled plastic pipe
     "cavity": (40, 190, 190),
     "fastener": (240, 200, 0),
     "unknown": (128, 128, 128),

@@ -7,8 +7,9 @@ evidence behind them (coverage.npz), as `arproj map --out DIR` writes them.
     coverage.npz  per sensor channel, what its footprint covered and where it responded (mapping.evidence):
                   the drill check judges by it
 
-Classes are the mapping's: power_line, metal_pipe, metal, fastener, wood, cavity. Pipes and cables are
-polylines, fasteners single points, studs (wood) and cavities closed outlines.
+Classes are the mapping's: power_line, metal_pipe, metal, fastener, non_metal, cavity. Pipes and cables are
+polylines, fasteners single points, studs and cavities closed outlines; non_metal (what only the capacitive
+channel shows: a wooden stud or a water-filled plastic pipe) is an outline or a line.
 """
 
 from __future__ import annotations
@@ -120,11 +121,14 @@ def _class_of(obj: object) -> str:
     if kind == "cable":
         return "power_line" if obj.live else "metal"  # type: ignore[attr-defined]
     if kind == "pipe":
-        return "metal_pipe"  # plastic pipes too: the legend's "pipe" colour is what a driller must avoid
+        # A plastic pipe is what the channels would call it: non-metal (a water-filled one raises the
+        # capacitive level; a dry one no channel sees, but the truth knows it is there and a driller must avoid
+        # it, so it is drawn in the same colour rather than left out)
+        return "metal_pipe" if obj.is_metal else "non_metal"  # type: ignore[attr-defined]
     if kind in ("screw", "nail"):
         return "fastener"
     if kind in ("stud", "beam"):
-        return "wood" if material == "wood" else "metal"
+        return "non_metal" if material == "wood" else "metal"
     if kind == "plate":
         return "metal"
     return "cavity"

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mapping.grid import build_grid
-from mapping.objects import extract_lines, extract_points, extract_regions
+from mapping.objects import background_level, extract_lines, extract_points, extract_regions
 from scanner.wall import densify, distance_to_polyline
 
 TRUTH = [
@@ -76,3 +76,25 @@ def test_wide_region_becomes_an_outline_and_lines_do_not():
     # Edges within 1 cm: the 4 mm splat σ blurs a step edge over ~2 cells of 4 mm; a sixth of the 6 cm stud.
     assert abs(ring[:, 0].min() - 0.40) < 0.01 and abs(ring[:, 0].max() - 0.46) < 0.01
     assert regions[0].width_m == pytest.approx(0.06, abs=0.01)  # the same 1 cm
+
+
+def test_two_sided_background_is_not_fooled_by_lowered_objects():
+    """The capacitive map: cavities lower it, studs and water raise it. A cavity over 10 % of the cells fills
+    the lower quantiles the one-sided estimate reads the noise from; the two-sided estimate finds the mode."""
+    rng = np.random.default_rng(3)
+    noise, level = 0.004, 0.22
+    values = level + rng.normal(0.0, noise, 100_000)
+    values[:10_000] -= 0.15  # a cavity
+    values[10_000:25_000] += 0.2  # studs and pipes
+    _, one_sided = background_level(values)
+    assert one_sided > 5 * noise  # the cavity's edge read as noise: every z comes out 5x too small
+    found_level, sigma = background_level(values, two_sided=True)
+    # 75 000 background cells: the median's standard error is 1.25 σ / √75 000 < 0.01 σ; allow σ / 8. The
+    # interquartile range of a sample clipped at 3 σ (0.3 % of it cut) gives σ to ~1 %; allow 3 %.
+    assert found_level == pytest.approx(level, abs=noise / 8)
+    assert sigma == pytest.approx(noise, rel=0.03)
+    # with nothing lowered the one-sided estimate stands, also where objects cover most of the wall (the
+    # median, and so the mode's first guess, then lies on them)
+    raised_only = level + rng.normal(0.0, noise, 100_000)
+    raised_only[:60_000] += 0.2
+    assert background_level(raised_only, two_sided=True) == background_level(raised_only)

@@ -90,3 +90,13 @@ def test_truth_map_from_a_wall_file_uses_the_mapping_classes():
     kinds = {o.cls for o in wm.objects}
     assert "power_line" in kinds and "metal_pipe" in kinds
     assert all(o.width_m > 0 for o in wm.objects if o.cls in ("power_line", "metal_pipe"))
+
+
+def test_truth_map_names_what_the_channels_can_tell():
+    wm = wall_map_from_wall_file(shipped_walls()["drywall_studs"])
+    by_shape = {(o.cls, o.shape) for o in wm.objects}
+    # the plastic water pipe and the wooden beam both only raise the capacitive level: non-metal, a line and an
+    # outline; the steel studs are metal, not pipes
+    assert ("non_metal", "line") in by_shape and ("non_metal", "outline") in by_shape
+    assert ("metal", "outline") in by_shape
+    assert not {"wood", "plastic_pipe"} & {o.cls for o in wm.objects}
