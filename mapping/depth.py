@@ -547,6 +547,7 @@ def _line_strips(i: int, targets: list[_Target], passes: list[_Pass], fp: Footpr
     # samples nearer another object than 2.5x its footprint's larger σ are masked (crossing pipes, screws)
     mask_radius = [2.5 * math.sqrt(max(fp.sigma_u_m, fp.sigma_v_m) ** 2 + (fp.spread * t.depth_guess) ** 2)
                    for t in others]
+    other_boxes = [(t.obj.points_m.min(axis=0), t.obj.points_m.max(axis=0)) for t in others]
     out = []
     for a, b in _segments(tg.obj):
         length = float(np.linalg.norm(b - a))
@@ -565,8 +566,13 @@ def _line_strips(i: int, targets: list[_Target], passes: list[_Pass], fp: Footpr
             if sel.sum() < 20:
                 continue
             keep = np.flatnonzero(sel)
-            for o, radius in zip(others, mask_radius, strict=True):
+            lo_xy, hi_xy = ps.xy[keep].min(axis=0), ps.xy[keep].max(axis=0)
+            for o, radius, (o_lo, o_hi) in zip(others, mask_radius, other_boxes, strict=True):
+                if np.any(o_lo > hi_xy + radius) or np.any(o_hi < lo_xy - radius):
+                    continue  # too far from these samples to mask any of them
                 keep = keep[distances_to_polyline(ps.xy[keep], o.obj.points_m) > radius]
+                if keep.size == 0:
+                    break
             if keep.size < 20 or np.ptp(q[keep]) < 0.02:
                 continue
             by_group.setdefault(ps.group, []).append((float(np.mean(s[keep])), float(np.mean(ps.raw[keep]))))

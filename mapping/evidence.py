@@ -67,18 +67,18 @@ def coverage_radii(sensor_meta: dict | None) -> dict[str, float]:
     return radii
 
 
-def covered_cells(info: GridInfo, xy: ArrayLike, radius_m: float) -> NDArray[np.bool_]:
-    """(height, width) True where some position of xy (n, 2) wall metres lies within radius_m of the cell
-    centre."""
+def sample_distance(info: GridInfo, xy: ArrayLike, max_radius_m: float) -> NDArray[np.float64]:
+    """(height, width) distance from each cell centre to the nearest position of xy (n, 2) wall metres, less
+    the merging error (a conservative figure); inf beyond max_radius_m."""
     p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     p = p[np.all(np.isfinite(p), axis=1)]
-    out = np.zeros(info.shape, bool)
+    out = np.full(info.shape, np.inf)
     if p.size == 0:
         return out
     # Positions merged on a fine raster over the grid (and the radius beyond it): no sort, bounded memory
-    x0, y0 = info.origin_x - radius_m, info.origin_y - radius_m
-    nx = int(np.ceil((info.width * info.resolution + 2 * radius_m) / _DEDUPE_M)) + 1
-    ny = int(np.ceil((info.height * info.resolution + 2 * radius_m) / _DEDUPE_M)) + 1
+    x0, y0 = info.origin_x - max_radius_m, info.origin_y - max_radius_m
+    nx = int(np.ceil((info.width * info.resolution + 2 * max_radius_m) / _DEDUPE_M)) + 1
+    ny = int(np.ceil((info.height * info.resolution + 2 * max_radius_m) / _DEDUPE_M)) + 1
     ix = np.floor((p[:, 0] - x0) / _DEDUPE_M).astype(np.int64)
     iy = np.floor((p[:, 1] - y0) / _DEDUPE_M).astype(np.int64)
     ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
@@ -89,16 +89,22 @@ def covered_cells(info: GridInfo, xy: ArrayLike, radius_m: float) -> NDArray[np.
     flat = np.flatnonzero(fine)
     points = np.column_stack([x0 + (flat % nx + 0.5) * _DEDUPE_M, y0 + (flat // nx + 0.5) * _DEDUPE_M])
     xs, ys = info.cell_centres()
-    lo, hi = points.min(axis=0) - radius_m - _DEDUPE_M, points.max(axis=0) + radius_m + _DEDUPE_M
+    lo, hi = points.min(axis=0) - max_radius_m, points.max(axis=0) + max_radius_m
     ci = np.flatnonzero((xs >= lo[0]) & (xs <= hi[0]))
     ri = np.flatnonzero((ys >= lo[1]) & (ys <= hi[1]))
     if ci.size == 0 or ri.size == 0:
         return out
     gx, gy = np.meshgrid(xs[ci], ys[ri])
-    d, _ = cKDTree(points).query(np.column_stack([gx.ravel(), gy.ravel()]), distance_upper_bound=radius_m)
-    # a merged position is within half a raster diagonal of the real one: ask for that much less
-    out[np.ix_(ri, ci)] = (d <= radius_m - 0.7072 * _DEDUPE_M).reshape(len(ri), len(ci))
+    d, _ = cKDTree(points).query(np.column_stack([gx.ravel(), gy.ravel()]), distance_upper_bound=max_radius_m)
+    # a merged position is within half a raster diagonal of the real one: count it that much farther
+    out[np.ix_(ri, ci)] = d.reshape(len(ri), len(ci)) + 0.7072 * _DEDUPE_M
     return out
+
+
+def covered_cells(info: GridInfo, xy: ArrayLike, radius_m: float) -> NDArray[np.bool_]:
+    """(height, width) True where some position of xy (n, 2) wall metres lies within radius_m of the cell
+    centre."""
+    return sample_distance(info, xy, radius_m) <= radius_m
 
 
 # Footprints at the surface and their growth with depth (scanner.sensor_model.SensorConfig), for the model of
@@ -280,9 +286,19 @@ class Coverage:
         radii = radii or DEFAULT_COVERAGE_RADIUS_M
         noise = noise or {}
         covered, response = {}, {}
+        radius = {c: radii.get(c, DEFAULT_COVERAGE_RADIUS_M["inductive"]) for c in grid.sensors}
+        positions = {c: sample_xy.get(c, np.zeros((0, 2))) for c in grid.sensors}
+        distance: dict[str, NDArray[np.float64]] = {}
         for sensor in grid.sensors:
-            xy = sample_xy.get(sensor, np.zeros((0, 2)))
-            covered[sensor] = covered_cells(grid.info, xy, radii.get(sensor, DEFAULT_COVERAGE_RADIUS_M["inductive"]))
+            if sensor in distance:
+                continue
+            # channels read at the same positions share one nearest-sample search, out to the widest radius
+            group = [c for c in grid.sensors if c not in distance and positions[c].shape == positions[sensor].shape
+                     and np.array_equal(positions[c], positions[sensor])]
+            d = sample_distance(grid.info, positions[sensor], max(radius[c] for c in group))
+            distance.update(dict.fromkeys(group, d))
+        for sensor in grid.sensors:
+            covered[sensor] = distance[sensor] <= radius[sensor]
             response[sensor] = unexplained_cells(grid, sensor, objects, covered[sensor],
                                                  noise.get(sensor, float("nan")))
         return cls(grid.info, covered, response, bounds)
