@@ -461,7 +461,7 @@ def _line_crossings(i: int, targets: list[_Target], passes: list[_Pass], fp: Foo
             s = float((ps.origin + t * ps.unit - a) @ e)
             # an oblique pass runs along the line too: its peak's core (±MIN_SIDE_SIGMAS) must keep clear of
             # the line's ends as well as its centre
-            margin = sig * (END_MARGIN_SIGMAS + MIN_SIDE_SIGMAS * math.sqrt(1.0 - sin * sin) / abs(sin))
+            margin = sig * (END_MARGIN_SIGMAS + MIN_SIDE_SIGMAS * math.sqrt(max(1.0 - sin * sin, 0.0)) / abs(sin))
             reach = MIN_SIDE_SIGMAS * sig / abs(sin)
             if margin <= s <= length - margin and ps.t[0] + reach <= t <= ps.t[-1] - reach:
                 found.append((s + 10.0 * j, ps, j, t, abs(sin), normal))
