@@ -57,20 +57,21 @@ def scanned_regions(result: MapResult) -> list[dict]:
     return regions(_looked(result), result.grid.info)
 
 
-def wall_texture(result: MapResult, px_per_m: float = 500.0) -> NDArray[np.uint8]:
-    """RGBA texture (H, W, 4) of the map over result.bounds."""
+def wall_texture(result: MapResult, px_per_m: float = 500.0,
+                 objects: list[mapfile.MappedObject] | None = None) -> NDArray[np.uint8]:
+    """RGBA texture (H, W, 4) of the map over result.bounds (objects: result.mapped_objects() if not given)."""
     idx, prob = class_map(result.grid)
-    return bake_texture(result.grid.info, idx, prob, list(CLASSES), _looked(result), result.mapped_objects(),
-                        result.bounds, px_per_m)
+    return bake_texture(result.grid.info, idx, prob, list(CLASSES), _looked(result),
+                        result.mapped_objects() if objects is None else objects, result.bounds, px_per_m)
 
 
 def write_wall_glb(result: MapResult, path: str | Path, mesh: trimesh.Trimesh | None = None,
-                   px_per_m: float = 500.0) -> Path:
+                   px_per_m: float = 500.0, objects: list[mapfile.MappedObject] | None = None) -> Path:
     """wall.glb: `mesh` (wall frame; default a flat tessellated wall over the bounds) with the map texture."""
     path = Path(path)
     x0, y0, x1, y1 = result.bounds
     base = mesh if mesh is not None else flat_wall_mesh(x0, y0, x1, y1)
-    textured = textured_wall_mesh(base, wall_texture(result, px_per_m), result.bounds)
+    textured = textured_wall_mesh(base, wall_texture(result, px_per_m, objects), result.bounds)
     scene = trimesh.Scene(textured)
     scene.metadata["extras"] = {"frame": "wall", "units": "m", "bounds_m": list(result.bounds)}
     path.write_bytes(scene.export(file_type="glb"))
@@ -87,7 +88,8 @@ def _scale_bar(ax, bounds: tuple[float, float, float, float]) -> None:
             fontsize=9, bbox={"facecolor": "white", "alpha": 0.7, "edgecolor": "none"})
 
 
-def write_map_png(result: MapResult, path: str | Path, title: str = "") -> Path:
+def write_map_png(result: MapResult, path: str | Path, title: str = "",
+                  objects: list[mapfile.MappedObject] | None = None) -> Path:
     """The classified map: inductive signal in grey, objects in class colours, legend and scale bar."""
     import matplotlib
 
@@ -107,7 +109,7 @@ def write_map_png(result: MapResult, path: str | Path, title: str = "") -> Path:
     ax.imshow(np.ma.masked_invalid(sig), origin="lower", extent=grid.info.extent, cmap=cmap, alpha=0.8)
     used = set()
     any_inferred = False
-    for o in result.mapped_objects():
+    for o in result.mapped_objects() if objects is None else objects:
         colour = np.array(CLASS_COLOURS.get(o.cls, CLASS_COLOURS["unknown"])) / 255.0
         used.add(o.cls)
         if o.shape == "point":
@@ -259,14 +261,15 @@ def export_steps(data: ScanData, result: MapResult, out_dir: str | Path, mesh: t
     if result.coverage is None:
         raise ValueError("the map result has no coverage layer")
     coverage = result.coverage
+    objects = result.mapped_objects()  # cut into measured and inferred stretches once, for every export
     return [
-        ("wall.glb", lambda: write_wall_glb(result, out / "wall.glb", mesh)),
-        (mapfile.FILE_NAME, lambda: mapfile.write_objects(out / mapfile.FILE_NAME, result.mapped_objects(),
+        ("wall.glb", lambda: write_wall_glb(result, out / "wall.glb", mesh, objects=objects)),
+        (mapfile.FILE_NAME, lambda: mapfile.write_objects(out / mapfile.FILE_NAME, objects,
                                                           scanned_regions(result))),
         (COVERAGE_FILE, lambda: coverage.save(out / COVERAGE_FILE)),
-        ("map.png", lambda: write_map_png(result, out / "map.png", title=title)),
+        ("map.png", lambda: write_map_png(result, out / "map.png", title=title, objects=objects)),
         ("signals.png", lambda: write_signal_plot(data, result, out / "signals.png", signal_y)),
-        ("objects.dxf", lambda: write_dxf(result.mapped_objects(), out / "objects.dxf")),
+        ("objects.dxf", lambda: write_dxf(objects, out / "objects.dxf")),
     ]
 
 

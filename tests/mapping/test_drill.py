@@ -179,9 +179,11 @@ def test_coverage_round_trips_and_bad_files_are_named(dense, tmp_path):
 
 
 def test_objects_json_round_trips_measured_flags_and_depth(dense, tmp_path):
+    import copy
+
     from mapping.mapfile import write_objects
 
-    _, objects = dense
+    objects = copy.deepcopy(dense[1])  # the module's map stays as the other tests read it
     objects[0].depth_m, objects[0].depth_sigma_m = 0.021, 0.002
     path = write_objects(tmp_path / "objects.json", objects)
     back = read_objects(path)
