@@ -66,6 +66,8 @@ def pass_peaks(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: st
             continue
         p, v = p[ok], v[ok]
         axis = int(samples["axis"][idx[0]])
+        if axis > 1:
+            continue  # a following pass runs along a line: its peaks are not crossings
         direction = float(samples["direction"][idx[0]])
         along = p[:, axis] - direction * lag_m
         base_levels.append(float(np.percentile(v, 20)))

@@ -12,12 +12,13 @@ scanner's speed limit on measuring moves, and the robot's move plus alignment pe
 Planners are generators per frame: they yield a list of passes (a stage), receive the measured samples of
 those passes (dict pass_id -> samples dict as in scanner/log.py), and may yield more (adaptive planning).
 `DensePlanner` is the paper's way: a serpentine raster with 1 cm line spacing. `AdaptivePlanner`: coarse
-horizontal and vertical passes first, then short passes placed to confirm, localize and trace what the
-coarse passes found (using the 1-D peak detector in scanner/peaks.py).
+horizontal and vertical passes first, then short passes placed to confirm what they found, trace it along its
+course and follow it (using the 1-D peak detector in scanner/peaks.py); STOPPING_RULE says when it stops.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Generator
 from dataclasses import asdict, dataclass, field
@@ -30,6 +31,14 @@ from scanner.peaks import PeakConfig, detect_peaks
 from scanner.wall import Wall
 
 REACH_TOLERANCE_M = 1e-6
+STOPPING_RULE = (
+    "Every object a coarse pass finds is traced along its course with crossings whose spacing grows with the "
+    "certainty of its direction, until it leaves the drives' reach, ends (no response on crossings down to "
+    "3 cm ahead nor on a square 4 cm around its last crossing) or meets a course already traced; a junction's "
+    "every branch is traced. Every traced stretch is then measured by a following pass along it; where that "
+    "pass's response falls below 70 % of the object's crossing peaks the object may have left its band "
+    "unseen, so it is crossed there and followed again (twice at most). What still falls is left inferred: the "
+    "drill check calls it unknown. Objects no coarse pass crosses are not traced.")
 
 
 @dataclass
@@ -59,7 +68,7 @@ class PassSpec:
 
     frame_id: int
     stage: str
-    axis: str  # 'x' (along u) or 'y' (along v)
+    axis: str  # 'x' (along u), 'y' (along v) or 'xy' (both drives at once: a following pass along an object)
     start_uv: tuple[float, float]
     end_uv: tuple[float, float]
 
@@ -69,6 +78,8 @@ class PassSpec:
 
     @property
     def direction(self) -> int:
+        if self.axis == "xy":
+            return 0  # no single axis: mapping neither shifts its samples for the lag nor takes its peaks as crossings
         i = 0 if self.axis == "x" else 1
         return 1 if self.end_uv[i] >= self.start_uv[i] else -1
 
@@ -202,8 +213,17 @@ class AdaptiveConfig:
     coarse_columns: tuple[float, ...] = (0.06, 0.29)  # u of vertical passes per frame (find horizontal ones)
     confirm_offset_m: float = 0.03  # second short pass beside each find: direction of the object
     confirm_half_length_m: float = 0.09  # long enough to see a 45° object shifted by the offset
-    trace_half_length_m: float = 0.05
-    end_search_steps: int = 3  # bisection passes to localize where an object ends between coarse passes
+    cross_half_m: float = 0.03  # half length of a tracing crossing, widened by 3 σ of the predicted course
+    position_sigma_m: float = 0.0015  # 1 σ of a crossing's peak position
+    min_step_m: float = 0.03  # tracing step between crossings: from min (new course, after a loss) ...
+    max_step_m: float = 0.25  # ... to max, growing by step_growth while each crossing lands where predicted
+    step_growth: float = 2.0
+    join_m: float = 0.01  # a crossing this close to a traced course is that course (met, or the same object)
+    ring_half_m: float = 0.04  # after a loss: a square of passes this far around the last crossing
+    edge_margin_m: float = 0.005
+    max_trace_stages: int = 60
+    follow_rounds: int = 2  # re-crossings where a following pass lost the response, then the stretch is inferred
+    follow_min_share: float = 0.7  # of the crossings' peak height: the following pass is still on the object
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -211,12 +231,17 @@ class AdaptiveConfig:
 
 @dataclass
 class AdaptivePlanner:
-    """Coarse grid first, then passes placed to confirm, localize and trace what was found.
+    """Coarse grid first, then passes placed to confirm, trace and follow what was found.
 
     Per frame: (1) coarse horizontal passes every `coarse_row_spacing_m` and vertical passes at
     `coarse_columns`; (2) for every peak found on a coarse pass, a short parallel *confirm* pass offset by
-    `confirm_offset_m` — the peak's shift gives the object's direction; (3) *trace* passes: where an object's
-    predicted course reaches the next coarse pass but is not found there, bisection passes localize its end.
+    `confirm_offset_m` — the peak's shift gives the object's direction; (3) *trace* passes (stage "trace"):
+    from each find, nearest first, both ends of the object are followed outward by short crossings, the step
+    growing while crossings land where the fitted direction predicts and shrinking where they do not; a lost
+    course is searched for on a square around its last crossing, whose every further hit starts a branch;
+    (4) *follow* passes (stage "follow", axis "xy", both drives at once) along each straight run of the traced
+    course, re-crossed where their response falls (STOPPING_RULE). `report` gets one row per traced object:
+    its length and the share of it the following passes measured.
     """
 
     wall: Wall
@@ -224,6 +249,8 @@ class AdaptivePlanner:
     sensor_hysteresis_m: float = 0.003
     config: AdaptiveConfig = field(default_factory=AdaptiveConfig)
     peaks: PeakConfig = field(default_factory=PeakConfig)
+    report: list[dict[str, Any]] = field(default_factory=list)  # one row per traced object, as frames finish
+    _at: np.ndarray = field(default_factory=lambda: np.zeros(2), repr=False)  # where the last pass ended
 
     def describe(self) -> dict[str, Any]:
         return {"kind": "adaptive", **self.config.to_dict()}
@@ -287,8 +314,6 @@ class AdaptivePlanner:
         coarse = self._coarse(frame)
         results = yield coarse
         by_spec = _by_spec(coarse, results)
-        rows = sorted({p.start_uv[1] for p in coarse if p.axis == "x"})
-        columns = sorted({p.start_uv[0] for p in coarse if p.axis == "y"})
         finds: list[tuple[PassSpec, float]] = []
         for spec in coarse:
             finds += [(spec, pos) for pos, _, _ in self._find(by_spec[spec], spec.axis)]
@@ -305,9 +330,130 @@ class AdaptivePlanner:
             return
         results = yield confirm
         by_confirm = _by_spec(confirm, results)
-        # (3) trace: follow each confirmed object to the next coarse line; where it is not found there, bisect
-        # the gap with short passes across its predicted course to localize where it ends.
-        open_ends: list[dict[str, Any]] = []
+        yield from self._trace(frame, coarse, by_spec, finds, by_confirm)
+
+    def _find_channels(self, samples: Samples, axis: str) -> list[tuple[float, float, str]]:
+        """Like _find, but [(position, height, channel)] of the strongest channel per object."""
+        coord = samples["drive_u_m"] if axis == "x" else samples["drive_v_m"]
+        direction = float(np.median(samples["direction"])) if len(coord) else 1.0
+        found = []
+        for channel in ("inductive", "ac"):
+            lag = self.sensor_hysteresis_m * direction if channel == "inductive" else 0.0
+            for peak in detect_peaks(coord, samples[channel], self.peaks):
+                found.append((peak.position - lag, peak.height, channel))
+        found.sort()
+        merged: list[tuple[float, float, str]] = []
+        for item in found:
+            if merged and abs(item[0] - merged[-1][0]) < self.peaks.merge_distance_m:
+                if item[1] > merged[-1][1]:
+                    merged[-1] = item
+                continue
+            merged.append(item)
+        return merged
+
+    def _cross(self, frame: FrameTarget, q: np.ndarray, d: np.ndarray, half: float) -> PassSpec | None:
+        """A short pass across a course of direction d at q: along u for steep courses, along v for flat ones."""
+        if abs(d[1]) >= abs(d[0]):
+            return self._short(frame, "trace", "x", float(q[1]), float(q[0]), half)
+        return self._short(frame, "trace", "y", float(q[0]), float(q[1]), half)
+
+    def _crossing_points(self, spec: PassSpec, samples: Samples) -> list[tuple[np.ndarray, float, str]]:
+        """Where objects cross a pass, in drive coordinates: [(uv, height, channel)]."""
+        out = []
+        for pos, height, channel in self._find_channels(samples, spec.axis):
+            uv = np.array([pos, spec.start_uv[1]]) if spec.axis == "x" else np.array([spec.start_uv[0], pos])
+            out.append((uv, height, channel))
+        return out
+
+    def _inside(self, frame: FrameTarget, p: np.ndarray, margin: float) -> bool:
+        return bool(frame.u_lo + margin <= p[0] <= frame.u_hi - margin
+                    and margin <= p[1] <= self.wall.height_m - margin)
+
+    def _run_track(self, frame: FrameTarget, tr: _Track, chains: list[_Chain],
+                   spawn: list[_Track]) -> StageGenerator:
+        """Trace one end of a course outward, crossing by crossing, until it leaves the reach, ends or meets a
+        traced course; at a junction every further branch is put on `spawn`."""
+        cfg = self.config
+        for _ in range(cfg.max_trace_stages):
+            head = tr.head()
+            if tr.ring:
+                r = cfg.ring_half_m
+                sides = [self._short(frame, "trace", "x", head[1] - r, head[0], r),
+                         self._short(frame, "trace", "y", head[0] + r, head[1], r),
+                         self._short(frame, "trace", "x", head[1] + r, head[0], r),
+                         self._short(frame, "trace", "y", head[0] - r, head[1], r)]
+                batch = [self._oriented(p) for p in sides if p is not None]
+                results = yield batch
+                tr.ring = False
+                hits = [h for spec, (_, samples) in zip(batch, sorted(results.items()), strict=True)
+                        for h in self._crossing_points(spec, samples)]
+                hits = [h for h in hits if all(ch.distance(h[0]) > cfg.join_m * 1.5 for ch in chains)]
+                if not hits:
+                    tr.stop = "end"
+                    return
+                sigma = math.sqrt(2.0) * cfg.position_sigma_m / cfg.ring_half_m
+                for k, (p, height, channel) in enumerate(hits):
+                    d = (p - head) / max(float(np.linalg.norm(p - head)), 1e-9)
+                    if k == 0:
+                        tr.add(p, height)
+                        tr.d, tr.sigma, tr.step = d, sigma, cfg.min_step_m
+                    else:  # a junction: every branch is traced
+                        chain = _Chain([head, p], [height, height], channel)
+                        chains.append(chain)
+                        spawn.append(_Track(chain, +1, d, cfg.min_step_m, sigma))
+                continue
+            step = tr.step
+            q = head + step * tr.d
+            while not self._inside(frame, q, cfg.edge_margin_m) and step > 0.01:
+                step *= 0.5
+                q = head + step * tr.d
+            if not self._inside(frame, q, cfg.edge_margin_m):
+                tr.stop = "edge"
+                return
+            if any(ch is not tr.chain and ch.near(q, tr.d, cfg.join_m) for ch in chains):
+                tr.stop = "met"  # a course traced from another find: it joins there
+                return
+            half = cfg.cross_half_m + 3.0 * (cfg.position_sigma_m + step * tr.sigma)
+            spec = self._cross(frame, q, tr.d, half)
+            if spec is None:
+                tr.stop = "edge"
+                return
+            spec = self._oriented(spec)
+            results = yield [spec]
+            hits = self._crossing_points(spec, next(iter(results.values())))
+            near = [h for h in hits if float(np.linalg.norm(h[0] - q)) < 0.8 * half]
+            if near:
+                p, height, _ = min(near, key=lambda h: float(np.linalg.norm(h[0] - q)))
+                innovation = float(np.linalg.norm(p - q))
+                tr.add(p, height)
+                tr.fit_direction(cfg.position_sigma_m)
+                grow = cfg.step_growth if innovation < cfg.join_m else 0.5  # off course: a bend may follow
+                limit = 0.3 * cfg.cross_half_m / max(tr.sigma, 1e-6)  # the course stays inside the window
+                tr.step = float(np.clip(min(step * grow, limit), cfg.min_step_m, cfg.max_step_m))
+            elif step > 1.5 * cfg.min_step_m:
+                tr.step = 0.5 * step  # the object ends or bends before q: look nearer
+            else:
+                tr.ring = True  # ends or turns within min_step: look around the head for where it goes
+        tr.stop = "stages"
+
+    def _oriented(self, spec: PassSpec) -> PassSpec:
+        """The pass run from its end nearer the drives' position (short rapids); remembers where it ends."""
+        a, b = np.array(spec.start_uv), np.array(spec.end_uv)
+        if np.linalg.norm(b - self._at) < np.linalg.norm(a - self._at):
+            spec = PassSpec(spec.frame_id, spec.stage, spec.axis, spec.end_uv, spec.start_uv)
+        self._at = np.array(spec.end_uv)
+        return spec
+
+    def _trace(self, frame: FrameTarget, coarse: list[PassSpec], by_spec: dict[PassSpec, Samples],
+               finds: list[tuple[PassSpec, float]], by_confirm: dict[PassSpec, Samples]) -> StageGenerator:
+        """(3) tracing and (4) following; see AdaptivePlanner and STOPPING_RULE."""
+        cfg = self.config
+        base = {c: float(np.percentile(np.concatenate([by_spec[p][c] for p in coarse]), 20))
+                for c in ("inductive", "ac")}
+        chains: list[_Chain] = []
+        tracks: list[_Track] = []
+        owned_hi = frame.u_hi if frame.u_hi < self.drives.travel_u_m - 1e-9 else self.drives.frame_width_m
+        seeds: list[tuple[np.ndarray, np.ndarray, float, str]] = []
         for spec, pos in finds:
             fixed = spec.start_uv[1] if spec.axis == "x" else spec.start_uv[0]
             limit = self.wall.height_m if spec.axis == "x" else frame.u_hi
@@ -315,47 +461,176 @@ class AdaptivePlanner:
             short = self._short(frame, "confirm", spec.axis, fixed + offset, pos, cfg.confirm_half_length_m)
             if short is None or short not in by_confirm:
                 continue
-            near = [p for p, _, _ in self._find(by_confirm[short], spec.axis)
-                    if abs(p - pos) < cfg.confirm_half_length_m * 0.8]
+            p0 = np.array([pos, fixed]) if spec.axis == "x" else np.array([fixed, pos])
+            if p0[0] > owned_hi:
+                continue  # the next frame finds it at its own left edge and traces it there
+            near = [c for c in self._crossing_points(short, by_confirm[short])
+                    if abs(c[0][0 if spec.axis == "x" else 1] - pos) < cfg.confirm_half_length_m * 0.8]
             if not near:
                 continue  # a point object (screw, nail) or an object parallel to the pass
-            slope = (min(near, key=lambda p: abs(p - pos)) - pos) / offset  # d(along) / d(fixed)
-            lines = rows if spec.axis == "x" else columns
-            for sign in (1.0, -1.0):  # both neighbours: the object may end on either side
-                nxt = [c for c in lines if (c - fixed) * sign > 1e-9]
-                if not nxt:
+            p1, h1, ch1 = min(near, key=lambda c: float(np.linalg.norm(c[0] - p0)))
+            seeds.append((p0, p1, h1, ch1))
+        self._at = np.array(coarse[-1].end_uv)
+        while seeds:
+            # nearest seed first, and one object traced to its ends before the next: short rapids, and the
+            # finds of the same object on other coarse passes are then on a traced course and skipped
+            k = min(range(len(seeds)), key=lambda i: float(np.linalg.norm(seeds[i][0] - self._at)))
+            p0, p1, h1, ch1 = seeds.pop(k)
+            d = (p1 - p0) / max(float(np.linalg.norm(p1 - p0)), 1e-9)
+            if any(ch.distance(p0) < 2 * cfg.join_m for ch in chains):
+                continue  # the same object, already traced from another find
+            chain = _Chain([p0, p1], [h1, h1], ch1)
+            chains.append(chain)
+            sigma = math.sqrt(2.0) * cfg.position_sigma_m / float(np.linalg.norm(p1 - p0))
+            queue = [_Track(chain, +1, d, cfg.min_step_m, sigma), _Track(chain, -1, -d, cfg.min_step_m, sigma)]
+            while queue:
+                tr = queue.pop(0)
+                tracks.append(tr)
+                yield from self._run_track(frame, tr, chains, queue)
+        for tr in tracks:
+            tr.stop = tr.stop or "stages"
+        # (4) following: a pass along every traced stretch; where the response falls, cross there and follow again
+        for chain in chains:
+            chain.segments = [[a, b, None] for a, b in itertools.pairwise(_straight_runs(chain.points,
+                                                                                       cfg.position_sigma_m))]
+        for round_ in range(cfg.follow_rounds + 1):
+            todo = [(ch, seg) for ch in chains for seg in ch.segments if seg[2] is None]
+            if not todo:
+                break
+            follow = []
+            rest = list(todo)
+            todo = []
+            while rest:  # nearest stretch next
+                k = min(range(len(rest)), key=lambda i: min(float(np.linalg.norm(rest[i][1][0] - self._at)),
+                                                            float(np.linalg.norm(rest[i][1][1] - self._at))))
+                item = rest.pop(k)
+                todo.append(item)
+                follow.append(self._oriented(PassSpec(frame.frame_id, "follow", "xy", _uv(item[1][0]),
+                                                      _uv(item[1][1]))))
+            results = yield follow
+            got = [results[i] for i in sorted(results)]
+            cross: list[PassSpec] = []
+            cross_owner: list[tuple[_Chain, list[Any], np.ndarray]] = []
+            for (chain, seg), samples in zip(todo, got, strict=True):
+                channel = chain.channel
+                level = base[channel] + cfg.follow_min_share * float(np.median(chain.heights))
+                ok = samples[channel] >= level
+                seg[2] = float(ok.mean())
+                if ok.all() or round_ == cfg.follow_rounds:
                     continue
-                target = min(nxt, key=lambda c: abs(c - fixed))
-                predicted = pos + slope * (target - fixed)
-                line = _line_spec(coarse, spec.axis, target)
-                if line is not None and any(abs(p - predicted) < 0.02 for p, _, _ in self._find(by_spec[line],
-                                                                                                  spec.axis)):
-                    continue  # found on the next coarse line too: the segment between is traced
-                open_ends.append({"axis": spec.axis, "pos": pos, "fixed": fixed, "slope": slope,
-                                  "lo": fixed, "hi": target})
-        unique: dict[tuple[Any, ...], dict[str, Any]] = {}
-        for end in open_ends:  # the same end reached from two finds (e.g. both channels) is searched once
-            unique.setdefault((end["axis"], round(end["lo"], 3), round(end["hi"], 3),
-                               round(end["pos"] + end["slope"] * (end["hi"] - end["fixed"]), 2)), end)
-        open_ends = list(unique.values())
-        for _ in range(cfg.end_search_steps):
-            trace: list[PassSpec] = []
-            owners: list[dict[str, Any]] = []
-            for end in open_ends:
-                mid = round(0.5 * (end["lo"] + end["hi"]), 6)
-                centre = end["pos"] + end["slope"] * (mid - end["fixed"])
-                short = self._short(frame, "trace", end["axis"], mid, centre, cfg.trace_half_length_m)
-                if short is not None:
-                    end["mid"], end["centre"] = mid, centre
-                    trace.append(short)
-                    owners.append(end)
-            if not trace:
-                return
-            results = yield trace
-            for end, (_, samples) in zip(owners, sorted(results.items()), strict=True):
-                seen = any(abs(p - end["centre"]) < 0.02 for p, _, _ in self._find(samples, end["axis"]))
-                end["lo" if seen else "hi"] = end["mid"]
-            open_ends = owners
+                bad = np.flatnonzero(~ok)
+                k = int(bad[len(bad) // 2])
+                m = np.array([samples["drive_u_m"][k], samples["drive_v_m"][k]])
+                d = (seg[1] - seg[0]) / max(float(np.linalg.norm(seg[1] - seg[0])), 1e-9)
+                spec = self._cross(frame, m, d, cfg.cross_half_m + 0.03)
+                if spec is not None:
+                    cross.append(self._oriented(spec))
+                    cross_owner.append((chain, seg, m))
+            if not cross:
+                break
+            results = yield cross
+            got = [results[i] for i in sorted(results)]
+            for (chain, seg, m), spec, samples in zip(cross_owner, cross, got, strict=True):
+                hits = self._crossing_points(spec, samples)
+                if not hits:
+                    continue  # the object is not there: that stretch stays inferred
+                p, height, _ = min(hits, key=lambda h: float(np.linalg.norm(h[0] - m)))
+                i = next(k for k, other in enumerate(chain.segments) if other is seg)
+                chain.segments[i:i + 1] = [[seg[0], p, None], [p, seg[1], None]]
+                chain.heights.append(height)
+        for k, chain in enumerate(chains):
+            length = sum(float(np.linalg.norm(b - a)) for a, b, _ in chain.segments)
+            measured = sum(float(np.linalg.norm(b - a)) * (s or 0.0) for a, b, s in chain.segments)
+            ends = sorted(t.stop for t in tracks if t.chain is chain)
+            self.report.append({"frame_id": frame.frame_id, "object": k, "channel": chain.channel,
+                                "length_m": round(length, 3), "measured_share": round(measured / length, 3)
+                                if length > 0 else 0.0, "ends": ends})
+
+@dataclass
+class _Chain:
+    """One traced object in a frame: crossing points in drive coordinates along its course, in order."""
+
+    points: list[np.ndarray]
+    heights: list[float]  # peak heights of its crossings (display units over the pass baseline)
+    channel: str  # the channel that saw it best: the following passes are judged in it
+    segments: list[list[Any]] = field(default_factory=list)  # [a, b, share of the follow pass that saw it]
+
+    def distance(self, p: np.ndarray) -> float:
+        return _distance_to_polyline(p, self.points)[0]
+
+    def near(self, p: np.ndarray, d: np.ndarray, radius: float) -> bool:
+        """p lies within radius of this course and d runs along it (not a crossing at an angle)."""
+        dist, seg = _distance_to_polyline(p, self.points)
+        return dist < radius and (seg is None or abs(float(seg @ d)) > 0.9)
+
+
+@dataclass
+class _Track:
+    """One end of a chain being traced outward."""
+
+    chain: _Chain
+    end: int  # +1: the chain's last point is the head, -1: its first
+    d: np.ndarray  # unit direction of travel
+    step: float  # distance to the next crossing, metres
+    sigma: float  # 1-σ uncertainty of the direction, rad
+    stop: str = ""  # why tracing stopped: edge, end, met, stages
+    ring: bool = False
+    ring_done: bool = False
+    pending: tuple[np.ndarray, float, float] | None = None
+
+    def head(self) -> np.ndarray:
+        return self.chain.points[-1] if self.end > 0 else self.chain.points[0]
+
+    def add(self, p: np.ndarray, height: float) -> None:
+        if self.end > 0:
+            self.chain.points.append(p)
+        else:
+            self.chain.points.insert(0, p)
+        self.chain.heights.append(height)
+
+    def fit_direction(self, position_sigma_m: float, n: int = 3) -> None:
+        """Direction and its σ from the last n crossings (a least-squares slope over their span)."""
+        pts = np.array(self.chain.points[-n:] if self.end > 0 else self.chain.points[:n][::-1])
+        c = pts.mean(axis=0)
+        _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
+        d = vt[0] if float(vt[0] @ self.d) >= 0 else -vt[0]
+        span = float(np.linalg.norm(pts[-1] - pts[0]))
+        self.d = d
+        self.sigma = position_sigma_m * math.sqrt(12.0 / len(pts)) / max(span, 1e-3)
+
+
+def _distance_to_polyline(p: np.ndarray, points: list[np.ndarray]) -> tuple[float, np.ndarray | None]:
+    """(distance from p to the polyline, unit direction of the nearest segment or None for a single point)."""
+    if len(points) == 1:
+        return float(np.linalg.norm(p - points[0])), None
+    best, best_dir = math.inf, None
+    for a, b in itertools.pairwise(points):
+        ab = b - a
+        length2 = float(ab @ ab)
+        t = 0.0 if length2 == 0 else float(np.clip((p - a) @ ab / length2, 0.0, 1.0))
+        dist = float(np.linalg.norm(p - (a + t * ab)))
+        if dist < best:
+            best, best_dir = dist, ab / max(math.sqrt(length2), 1e-12)
+    return best, best_dir
+
+
+def _straight_runs(points: list[np.ndarray], tolerance_m: float) -> list[np.ndarray]:
+    """The crossing points that start and end straight runs: one following pass per run, not per crossing."""
+    keep = [points[0]]
+    i = 0
+    while i < len(points) - 1:
+        j = i + 1
+        while j + 1 < len(points) and all(
+                _distance_to_polyline(points[k], [points[i], points[j + 1]])[0] <= tolerance_m
+                for k in range(i + 1, j + 1)):
+            j += 1
+        keep.append(points[j])
+        i = j
+    return keep
+
+
+def _uv(p: np.ndarray) -> tuple[float, float]:
+    return round(float(p[0]), 6), round(float(p[1]), 6)  # µm: exact on the G-code wire
 
 
 def _line_spec(passes: list[PassSpec], axis: str, fixed: float) -> PassSpec | None:

@@ -82,6 +82,7 @@ class ScanResult:
     n_frames: int
     frames: list[dict[str, Any]] = field(default_factory=list)
     measured_passes: int = 0  # passes measured in this run (the rest came from the log)
+    plan_report: list[dict[str, Any]] = field(default_factory=list)  # the planner's traced objects, if it keeps them
 
 
 ProgressFn = Callable[[float, float, int], None]  # (scan time so far s, estimated total s, passes done)
@@ -200,7 +201,7 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
     merged = {k: np.concatenate([s[k] for s in all_samples]) for k in all_samples[0]} if all_samples else {}
     if merged:
         merged["seq"] = np.arange(len(merged["time_s"]))
-    return ScanResult(merged, t, pass_id, len(targets), frame_rows, measured)
+    return ScanResult(merged, t, pass_id, len(targets), frame_rows, measured, list(getattr(planner, "report", [])))
 
 
 def _measure(backend: Backend, pass_id: int, spec: PassSpec, report: FrameReport, t_start: float,
@@ -213,7 +214,7 @@ def _measure(backend: Backend, pass_id: int, spec: PassSpec, report: FrameReport
         raise InputError(f"scanner reported {name} = {int(counts[i, ch])} counts (sample {i} of pass {pass_id}), "
                          f"outside 0..{COUNTS_FULL_SCALE}", "check the scanner (sensor fault?) and resume")
     n = len(t_rel)
-    axis = 0 if spec.axis == "x" else 1
+    axis = {"x": 0, "y": 1}.get(spec.axis, 2)  # 2: a following pass (both drives), see PassSpec
     samples: Samples = {
         "time_s": t_start + t_rel, "frame_id": np.full(n, spec.frame_id), "pass_id": np.full(n, pass_id),
         "drive_u_m": uv[:, 0], "drive_v_m": uv[:, 1],

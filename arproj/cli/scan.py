@@ -111,6 +111,14 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         console.print(f"{scan_log.path}: {result.n_frames} frames, {result.n_passes} passes "
                       f"({result.measured_passes} measured now), {n} samples; simulated scan time "
                       f"{_fmt_duration(result.scan_time_s)} ({plan_kind})")
+        if result.plan_report:
+            from scanner.plan import STOPPING_RULE
+
+            console.print(f"stopping rule: {STOPPING_RULE}")
+            for row in result.plan_report:
+                console.print(f"  frame {row['frame_id']} object {row['object']} ({row['channel']}): "
+                              f"{row['length_m']:.2f} m traced, {100 * row['measured_share']:.0f} % measured "
+                              f"by following passes; ends: {', '.join(row['ends'])}")
         scan_log.close()
 
     @app.command("scan-plot")

@@ -89,3 +89,13 @@ def test_adaptive_plan_takes_under_a_fifth_of_the_dense_time():
     result = run_scan(wall, DirectBackend(world), robot, plan_kind="adaptive", sensor=sensor, drives=drives)
     assert result.scan_time_s < 0.2 * dense_time  # the bench's TARGET_TIME_RATIO_RANDOM
     # what the map makes of it (recall, false-safe length): tests/mapping/test_adaptive_scan.py
+
+
+def test_adaptive_options_round_trip_through_the_logs_meta():
+    from scanner.plan import AdaptiveConfig, make_planner
+
+    wall = random_wall(3)
+    cfg = AdaptiveConfig(max_step_m=0.2, follow_rounds=1)
+    planner = make_planner("adaptive", wall, DriveConfig(), options={k: v for k, v in cfg.to_dict().items()})
+    again = make_planner("adaptive", wall, DriveConfig(), options=planner.describe())
+    assert again.config == planner.config == cfg  # a resumed scan replays the same plan
