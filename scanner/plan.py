@@ -222,8 +222,13 @@ class AdaptiveConfig:
     ring_half_m: float = 0.04  # after a loss: a square of passes this far around the last crossing
     edge_margin_m: float = 0.005
     max_trace_stages: int = 60
+    seam_m: float = 0.02  # a frame traces what it finds up to this far beyond the next frame's left edge
+    free_reach: float = 1.3  # a coarse crossing in the predicted window up to max(this many steps (+2 cm),
+    # max_step_m) ahead is taken as the next crossing: the following pass measures the stretch up to it
     follow_rounds: int = 2  # re-crossings where a following pass lost the response, then the stretch is inferred
     follow_min_share: float = 0.7  # of the crossings' peak height: the following pass is still on the object
+    follow_min_m: float = 0.01  # a stretch shorter than this between two crossings is covered by them
+    end_tolerance_m: float = 0.015  # the following pass's response may fall this near a course's end
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -310,27 +315,9 @@ class AdaptivePlanner:
         return merged
 
     def frame_stages(self, frame: FrameTarget) -> StageGenerator:
-        cfg = self.config
         coarse = self._coarse(frame)
         results = yield coarse
-        by_spec = _by_spec(coarse, results)
-        finds: list[tuple[PassSpec, float]] = []
-        for spec in coarse:
-            finds += [(spec, pos) for pos, _, _ in self._find(by_spec[spec], spec.axis)]
-        # (2) confirm: a parallel short pass beside every find gives the object's local direction.
-        confirm: list[PassSpec] = []
-        for spec, pos in finds:
-            fixed = spec.start_uv[1] if spec.axis == "x" else spec.start_uv[0]
-            limit = self.wall.height_m if spec.axis == "x" else frame.u_hi
-            offset = cfg.confirm_offset_m if fixed + cfg.confirm_offset_m <= limit else -cfg.confirm_offset_m
-            short = self._short(frame, "confirm", spec.axis, fixed + offset, pos, cfg.confirm_half_length_m)
-            if short is not None:
-                confirm.append(short)
-        if not confirm:
-            return
-        results = yield confirm
-        by_confirm = _by_spec(confirm, results)
-        yield from self._trace(frame, coarse, by_spec, finds, by_confirm)
+        yield from self._trace(frame, coarse, _by_spec(coarse, results))
 
     def _find_channels(self, samples: Samples, axis: str) -> list[tuple[float, float, str]]:
         """Like _find, but [(position, height, channel)] of the strongest channel per object."""
@@ -370,10 +357,14 @@ class AdaptivePlanner:
                     and margin <= p[1] <= self.wall.height_m - margin)
 
     def _run_track(self, frame: FrameTarget, tr: _Track, chains: list[_Chain],
-                   spawn: list[_Track]) -> StageGenerator:
+                   spawn: list[_Track], known: list[tuple[np.ndarray, float, str]]) -> StageGenerator:
         """Trace one end of a course outward, crossing by crossing, until it leaves the reach, ends or meets a
-        traced course; at a junction every further branch is put on `spawn`."""
+        traced course; at a junction every further branch is put on `spawn`. `known`: crossings the coarse
+        passes measured already; one lying on the predicted course ahead is taken as the next crossing."""
         cfg = self.config
+        if len(tr.chain.points) >= 3:  # the other end was traced first: its crossings give the direction here
+            tr.fit_direction(cfg.position_sigma_m)
+            tr.step = float(np.clip(0.3 * cfg.cross_half_m / max(tr.sigma, 1e-6), cfg.min_step_m, cfg.max_step_m))
         for _ in range(cfg.max_trace_stages):
             head = tr.head()
             if tr.ring:
@@ -403,13 +394,17 @@ class AdaptivePlanner:
                         spawn.append(_Track(chain, +1, d, cfg.min_step_m, sigma))
                 continue
             step = tr.step
-            q = head + step * tr.d
-            while not self._inside(frame, q, cfg.edge_margin_m) and step > 0.01:
-                step *= 0.5
-                q = head + step * tr.d
-            if not self._inside(frame, q, cfg.edge_margin_m):
-                tr.stop = "edge"
+            free = self._known_ahead(tr, head, step, known, chains)
+            if free is not None:  # a coarse pass crossed the course where it is predicted: no pass needed
+                p, height, innovation = free
+                self._advance(tr, p, height, innovation, float((p - head) @ tr.d))
+                continue
+            to_edge = self._to_edge(frame, head, tr.d, cfg.edge_margin_m)
+            if to_edge < step:  # the course leaves the reach within this step: the following pass runs on to
+                tr.stop = "edge"  # the edge (where its response falls, it is crossed there)
+                tr.edge_point = head + max(to_edge, 0.0) * tr.d
                 return
+            q = head + step * tr.d
             if any(ch is not tr.chain and ch.near(q, tr.d, cfg.join_m) for ch in chains):
                 tr.stop = "met"  # a course traced from another find: it joins there
                 return
@@ -424,17 +419,55 @@ class AdaptivePlanner:
             near = [h for h in hits if float(np.linalg.norm(h[0] - q)) < 0.8 * half]
             if near:
                 p, height, _ = min(near, key=lambda h: float(np.linalg.norm(h[0] - q)))
-                innovation = float(np.linalg.norm(p - q))
-                tr.add(p, height)
-                tr.fit_direction(cfg.position_sigma_m)
-                grow = cfg.step_growth if innovation < cfg.join_m else 0.5  # off course: a bend may follow
-                limit = 0.3 * cfg.cross_half_m / max(tr.sigma, 1e-6)  # the course stays inside the window
-                tr.step = float(np.clip(min(step * grow, limit), cfg.min_step_m, cfg.max_step_m))
+                self._advance(tr, p, height, float(np.linalg.norm(p - q)), step)
             elif step > 1.5 * cfg.min_step_m:
                 tr.step = 0.5 * step  # the object ends or bends before q: look nearer
             else:
                 tr.ring = True  # ends or turns within min_step: look around the head for where it goes
         tr.stop = "stages"
+
+    def _advance(self, tr: _Track, p: np.ndarray, height: float, innovation: float, step: float) -> None:
+        """Add crossing p (innovation: its distance from the prediction) and set the next step from the course's
+        direction certainty."""
+        cfg = self.config
+        tr.add(p, height)
+        tr.fit_direction(cfg.position_sigma_m)
+        grow = cfg.step_growth if innovation < cfg.join_m else 0.5  # off course: a bend may follow
+        limit = 0.3 * cfg.cross_half_m / max(tr.sigma, 1e-6)  # the course stays inside the window
+        tr.step = float(np.clip(min(step * grow, limit), cfg.min_step_m, cfg.max_step_m))
+
+    def _known_ahead(self, tr: _Track, head: np.ndarray, step: float, known: list[tuple[np.ndarray, float, str]],
+                     chains: list[_Chain]) -> tuple[np.ndarray, float, float] | None:
+        """(point, height, innovation) of the coarse crossing that lies on the predicted course up to a step
+        ahead (the nearest to the course), or None."""
+        cfg = self.config
+        best = None
+        for p, height, _ in known:
+            v = p - head
+            along = float(v @ tr.d)
+            if not 0.5 * cfg.min_step_m < along <= max(cfg.free_reach * step + 0.02, cfg.max_step_m):
+                continue
+            lateral = float(np.linalg.norm(v - along * tr.d))
+            half = cfg.cross_half_m + 3.0 * (cfg.position_sigma_m + along * tr.sigma)
+            if lateral >= 0.8 * half or (best is not None and lateral >= best[2]):
+                continue
+            if any(p is q for ch in chains for q in ch.points):
+                continue  # a crossing of a course traced already (this one's or another's)
+            best = (p, height, lateral)
+        return best
+
+    def _to_edge(self, frame: FrameTarget, p: np.ndarray, d: np.ndarray, margin: float) -> float:
+        """Distance from p along d to the edge of the reach (less the margin) it runs towards; negative if p is
+        beyond it already."""
+        lo = np.array([frame.u_lo + margin, margin])
+        hi = np.array([frame.u_hi - margin, self.wall.height_m - margin])
+        t = math.inf
+        for i in range(2):
+            if d[i] > 1e-12:
+                t = min(t, (hi[i] - p[i]) / d[i])
+            elif d[i] < -1e-12:
+                t = min(t, (lo[i] - p[i]) / d[i])
+        return float(t)
 
     def _oriented(self, spec: PassSpec) -> PassSpec:
         """The pass run from its end nearer the drives' position (short rapids); remembers where it ends."""
@@ -444,57 +477,78 @@ class AdaptivePlanner:
         self._at = np.array(spec.end_uv)
         return spec
 
-    def _trace(self, frame: FrameTarget, coarse: list[PassSpec], by_spec: dict[PassSpec, Samples],
-               finds: list[tuple[PassSpec, float]], by_confirm: dict[PassSpec, Samples]) -> StageGenerator:
-        """(3) tracing and (4) following; see AdaptivePlanner and STOPPING_RULE."""
+    def _trace(self, frame: FrameTarget, coarse: list[PassSpec], by_spec: dict[PassSpec, Samples]
+               ) -> StageGenerator:
+        """(2) confirming, (3) tracing and (4) following; see AdaptivePlanner and STOPPING_RULE."""
         cfg = self.config
         base = {c: float(np.percentile(np.concatenate([by_spec[p][c] for p in coarse]), 20))
                 for c in ("inductive", "ac")}
         chains: list[_Chain] = []
         tracks: list[_Track] = []
-        owned_hi = frame.u_hi if frame.u_hi < self.drives.travel_u_m - 1e-9 else self.drives.frame_width_m
-        seeds: list[tuple[np.ndarray, np.ndarray, float, str]] = []
-        for spec, pos in finds:
-            fixed = spec.start_uv[1] if spec.axis == "x" else spec.start_uv[0]
-            limit = self.wall.height_m if spec.axis == "x" else frame.u_hi
-            offset = cfg.confirm_offset_m if fixed + cfg.confirm_offset_m <= limit else -cfg.confirm_offset_m
-            short = self._short(frame, "confirm", spec.axis, fixed + offset, pos, cfg.confirm_half_length_m)
-            if short is None or short not in by_confirm:
-                continue
-            p0 = np.array([pos, fixed]) if spec.axis == "x" else np.array([fixed, pos])
-            if p0[0] > owned_hi:
-                continue  # the next frame finds it at its own left edge and traces it there
-            near = [c for c in self._crossing_points(short, by_confirm[short])
-                    if abs(c[0][0 if spec.axis == "x" else 1] - pos) < cfg.confirm_half_length_m * 0.8]
-            if not near:
-                continue  # a point object (screw, nail) or an object parallel to the pass
-            p1, h1, ch1 = min(near, key=lambda c: float(np.linalg.norm(c[0] - p0)))
-            seeds.append((p0, p1, h1, ch1))
+        # neighbouring frames overlap: a find near the seam is traced by the frame that sees it clear of its edge
+        last = frame.u_hi < self.drives.travel_u_m - 1e-9
+        owned_hi = frame.u_hi if last else self.drives.frame_width_m + cfg.seam_m
+        owned_lo = frame.u_lo if frame.frame_id == 0 else frame.u_lo + cfg.seam_m
+        known: list[tuple[np.ndarray, float, str]] = []  # the coarse passes' crossings, in drive coordinates
+        seeds: list[tuple[np.ndarray, PassSpec, float]] = []
+        for spec in coarse:
+            for p, height, channel in self._crossing_points(spec, by_spec[spec]):
+                known.append((p, height, channel))
+                seeds.append((p, spec, float(p[0] if spec.axis == "x" else p[1])))
         self._at = np.array(coarse[-1].end_uv)
         while seeds:
             # nearest seed first, and one object traced to its ends before the next: short rapids, and the
             # finds of the same object on other coarse passes are then on a traced course and skipped
             k = min(range(len(seeds)), key=lambda i: float(np.linalg.norm(seeds[i][0] - self._at)))
-            p0, p1, h1, ch1 = seeds.pop(k)
-            d = (p1 - p0) / max(float(np.linalg.norm(p1 - p0)), 1e-9)
+            p0, spec, pos = seeds.pop(k)
+            if not owned_lo <= p0[0] <= owned_hi:
+                continue  # the neighbouring frame finds it clear of its edge and traces it there
             if any(ch.distance(p0) < 2 * cfg.join_m for ch in chains):
                 continue  # the same object, already traced from another find
+            # (2) confirm: a parallel short pass beside the find gives the object's local direction
+            fixed = spec.start_uv[1] if spec.axis == "x" else spec.start_uv[0]
+            limit = self.wall.height_m if spec.axis == "x" else frame.u_hi
+            offset = cfg.confirm_offset_m if fixed + cfg.confirm_offset_m <= limit else -cfg.confirm_offset_m
+            short = self._short(frame, "confirm", spec.axis, fixed + offset, pos, cfg.confirm_half_length_m)
+            if short is None:
+                continue
+            short = self._oriented(short)
+            results = yield [short]
+            near = [c for c in self._crossing_points(short, next(iter(results.values())))
+                    if abs(c[0][0 if spec.axis == "x" else 1] - pos) < cfg.confirm_half_length_m * 0.8]
+            if not near:
+                continue  # a point object (screw, nail) or an object parallel to the pass
+            p1, h1, ch1 = min(near, key=lambda c: float(np.linalg.norm(c[0] - p0)))
+            d = (p1 - p0) / max(float(np.linalg.norm(p1 - p0)), 1e-9)
             chain = _Chain([p0, p1], [h1, h1], ch1)
             chains.append(chain)
             sigma = math.sqrt(2.0) * cfg.position_sigma_m / float(np.linalg.norm(p1 - p0))
-            queue = [_Track(chain, +1, d, cfg.min_step_m, sigma), _Track(chain, -1, -d, cfg.min_step_m, sigma)]
+            step = float(np.clip(0.3 * cfg.cross_half_m / sigma, cfg.min_step_m, cfg.max_step_m))  # see _advance
+            queue = [_Track(chain, +1, d, step, sigma), _Track(chain, -1, -d, step, sigma)]
             while queue:
                 tr = queue.pop(0)
                 tracks.append(tr)
-                yield from self._run_track(frame, tr, chains, queue)
+                yield from self._run_track(frame, tr, chains, queue, known)
         for tr in tracks:
             tr.stop = tr.stop or "stages"
         # (4) following: a pass along every traced stretch; where the response falls, cross there and follow again
         for chain in chains:
-            chain.segments = [[a, b, None] for a, b in itertools.pairwise(_straight_runs(chain.points,
+            course = list(chain.points)
+            for tr in tracks:  # where tracing stopped short of the edge, the following pass runs on to it
+                if tr.chain is chain and tr.edge_point is not None:
+                    end = course[-1] if tr.end > 0 else course[0]
+                    if float(np.linalg.norm(tr.edge_point - end)) > 1e-4:
+                        course = [*course, tr.edge_point] if tr.end > 0 else [tr.edge_point, *course]
+            chain.segments = [[a, b, None] for a, b in itertools.pairwise(_straight_runs(course,
                                                                                        cfg.position_sigma_m))]
         for round_ in range(cfg.follow_rounds + 1):
-            todo = [(ch, seg) for ch in chains for seg in ch.segments if seg[2] is None]
+            todo = []
+            for ch in chains:
+                for seg in ch.segments:
+                    if seg[2] is None and float(np.linalg.norm(seg[1] - seg[0])) < cfg.follow_min_m:
+                        seg[2] = 1.0  # the crossings at its ends cover it
+                    elif seg[2] is None:
+                        todo.append((ch, seg))
             if not todo:
                 break
             follow = []
@@ -510,33 +564,51 @@ class AdaptivePlanner:
             results = yield follow
             got = [results[i] for i in sorted(results)]
             cross: list[PassSpec] = []
-            cross_owner: list[tuple[_Chain, list[Any], np.ndarray]] = []
+            cross_owner: list[tuple[_Chain, list[Any], np.ndarray, float, float]] = []
             for (chain, seg), samples in zip(todo, got, strict=True):
                 channel = chain.channel
                 level = base[channel] + cfg.follow_min_share * float(np.median(chain.heights))
+                a, b = seg[0], seg[1]
+                length = max(float(np.linalg.norm(b - a)), 1e-9)
+                d = (b - a) / length
+                t = (np.column_stack([samples["drive_u_m"], samples["drive_v_m"]]) - a) @ d
                 ok = samples[channel] >= level
+                # where a course ends, the response falls within a footprint of its end: not a departure
+                ok |= (t < cfg.end_tolerance_m) & (seg is chain.segments[0])
+                ok |= (t > length - cfg.end_tolerance_m) & (seg is chain.segments[-1])
                 seg[2] = float(ok.mean())
                 if ok.all() or round_ == cfg.follow_rounds:
                     continue
                 bad = np.flatnonzero(~ok)
                 k = int(bad[len(bad) // 2])
                 m = np.array([samples["drive_u_m"][k], samples["drive_v_m"][k]])
-                d = (seg[1] - seg[0]) / max(float(np.linalg.norm(seg[1] - seg[0])), 1e-9)
                 spec = self._cross(frame, m, d, cfg.cross_half_m + 0.03)
                 if spec is not None:
                     cross.append(self._oriented(spec))
-                    cross_owner.append((chain, seg, m))
+                    cross_owner.append((chain, seg, m, float(np.clip(t[bad[0]] - 0.01, 0.0, length)),
+                                        float(np.clip(t[bad[-1]] + 0.01, 0.0, length))))
             if not cross:
                 break
             results = yield cross
             got = [results[i] for i in sorted(results)]
-            for (chain, seg, m), spec, samples in zip(cross_owner, cross, got, strict=True):
+            for (chain, seg, m, t_lo, t_hi), spec, samples in zip(cross_owner, cross, got, strict=True):
                 hits = self._crossing_points(spec, samples)
                 if not hits:
                     continue  # the object is not there: that stretch stays inferred
                 p, height, _ = min(hits, key=lambda h: float(np.linalg.norm(h[0] - m)))
+                a, b = seg[0], seg[1]
+                d = (b - a) / max(float(np.linalg.norm(b - a)), 1e-9)
+                # the stretches before and after the fall were followed on the object: only the fall is redone
+                parts = []
+                if t_lo > cfg.follow_min_m:
+                    parts.append([a, a + t_lo * d, 1.0])
+                g1 = a + t_lo * d if t_lo > cfg.follow_min_m else a
+                g2 = a + t_hi * d if float(np.linalg.norm(b - a)) - t_hi > cfg.follow_min_m else b
+                parts += [[g1, p, None], [p, g2, None]]
+                if g2 is not b:
+                    parts.append([g2, b, 1.0])
                 i = next(k for k, other in enumerate(chain.segments) if other is seg)
-                chain.segments[i:i + 1] = [[seg[0], p, None], [p, seg[1], None]]
+                chain.segments[i:i + 1] = parts
                 chain.heights.append(height)
         for k, chain in enumerate(chains):
             length = sum(float(np.linalg.norm(b - a)) for a, b, _ in chain.segments)
@@ -577,6 +649,7 @@ class _Track:
     ring: bool = False
     ring_done: bool = False
     pending: tuple[np.ndarray, float, float] | None = None
+    edge_point: np.ndarray | None = None  # where the course leaves the reach, if tracing stopped short of it
 
     def head(self) -> np.ndarray:
         return self.chain.points[-1] if self.end > 0 else self.chain.points[0]
