@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from mapping.grid import GridInfo, SensorModel, WallGrid
+from mapping.grid import GridInfo, SensorModel, WallGrid, additive_units
 from mapping.objects import MapObject, _distance_to_polyline, extract_lines, extract_points
 from mapping.stitching import FrameGraph, apply_pose
 
@@ -38,7 +38,7 @@ def frame_features(uv: NDArray[np.float64], inductive: NDArray[np.float64],
     grid.add_samples(uv, {"inductive": a})
     sig = grid.signal("inductive")
     lines = extract_lines(sig, info)
-    points = [p for p in extract_points(sig, info, min_strength=8.0)
+    points = [p for p in extract_points(additive_units("inductive", sig), info, min_strength=8.0)
               if all(_distance_to_polyline(p.points_m[0], ln.points_m) > 0.02 for ln in lines)]
     return points, lines
 

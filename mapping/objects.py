@@ -466,35 +466,61 @@ def extract_lines(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 
     return [MapObject("line", p, w, s) for p, w, s in zip(polys, widths, strengths, strict=True)]
 
 
+POINT_RAY_DIRECTIONS = 16  # directions in which a point's surroundings are probed
+POINT_RAY_M = (0.012, 0.030)  # ... from this far out: beyond a fastener's footprint half-width, within a line's run
+POINT_MIN_REL = 0.3  # a point stands at least this share above what it sits on (a line, a stud): pass-to-pass gain
+# jitter (2 % σ) ripples a strong line by under a tenth of its level, a fastener on it adds over half
+
+
 def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 0.004,
-                   min_strength: float = 6.0, max_elongation: float = 2.0,
-                   max_width_m: float = 0.12) -> list[MapObject]:
-    """Small round peaks (screws, nails) as 'point' MapObjects with sub-cell positions."""
+                   min_strength: float = 6.0, min_rel: float = POINT_MIN_REL) -> list[MapObject]:
+    """Small peaks (screws, nails) as 'point' MapObjects with sub-cell positions, alone or on top of a line or
+    an area (a screw on a pipe, a steel stud's screws): signal in units where objects add up.
+
+    Each local maximum of the smoothed map is compared with what it sits on: along POINT_RAY_DIRECTIONS rays
+    from POINT_RAY_M[0] to POINT_RAY_M[1], the lowest value on each ray, and the highest of those over the
+    rays (a line through the peak keeps its level along its own direction; a point alone falls off on every
+    ray; a short stretch of line or a wide area does not fall off within the rays at all). The peak is a point
+    when it rises min_strength robust σ and min_rel of that level above it. features: "base" (what it sits on,
+    σ units), "half_width_m" (median over the rays of the distance where it has fallen half-way to the base).
+    """
     z, _, _ = normalise(signal)
     known = np.isfinite(signal)
     sigma_px = sigma_m / info.resolution
     s, gx, gy, hxx, hxy, hyy, w = _smooth_derivatives(z, known, sigma_px)
     peak = (s == ndimage.maximum_filter(s, size=5)) & (s >= min_strength) & (w > 0.5)
-    tr_half = 0.5 * (hxx + hyy)
-    disc = np.sqrt(np.maximum(0.25 * (hxx - hyy) ** 2 + hxy**2, 0.0))
-    lam1, lam2 = tr_half - disc, tr_half + disc  # lam1 ≤ lam2
-    round_ = (lam2 < 0) & (lam1 / np.minimum(lam2, -1e-12) <= max_elongation**2)
+    rows, cols = np.nonzero(peak)
+    if rows.size == 0:
+        return []
+    angles = np.arange(POINT_RAY_DIRECTIONS) * 2.0 * np.pi / POINT_RAY_DIRECTIONS
+    steps = np.arange(0.0, POINT_RAY_M[1] + 1e-9, min(info.resolution, 0.002)) / info.resolution
+    far = steps >= POINT_RAY_M[0] / info.resolution
+    # (peaks, directions, steps) profiles of the smoothed map along the rays
+    rr = rows[:, None, None] + np.sin(angles)[None, :, None] * steps[None, None, :]
+    cc = cols[:, None, None] + np.cos(angles)[None, :, None] * steps[None, None, :]
+    profile = ndimage.map_coordinates(s, [rr.ravel(), cc.ravel()], order=1, mode="nearest").reshape(rr.shape)
+    base = profile[:, :, far].min(axis=2).max(axis=1)
+    height = s[rows, cols]
+    bump = height - base
     out = []
-    for rr, cc in zip(*np.nonzero(peak & round_), strict=True):
-        H = np.array([[hxx[rr, cc], hxy[rr, cc]], [hxy[rr, cc], hyy[rr, cc]]])
-        g = np.array([gx[rr, cc], gy[rr, cc]])
+    for k in np.flatnonzero((bump >= min_strength) & (bump >= min_rel * np.maximum(base, 0.0))):
+        rr_k, cc_k = rows[k], cols[k]
+        H = np.array([[hxx[rr_k, cc_k], hxy[rr_k, cc_k]], [hxy[rr_k, cc_k], hyy[rr_k, cc_k]]])
+        g = np.array([gx[rr_k, cc_k], gy[rr_k, cc_k]])
         try:
             off = -np.linalg.solve(H, g)
         except np.linalg.LinAlgError:
             continue
-        if np.any(np.abs(off) > 1.0):
-            continue
-        xy = info.to_wall(np.array([[cc + off[0], rr + off[1]]]))
-        sig_tot = np.sqrt(max(s[rr, cc] / max(-lam2[rr, cc], 1e-9), 0.0))
-        width = 2.3548 * np.sqrt(max(sig_tot**2 - sigma_px**2 - 1.0, 0.0)) * info.resolution
-        if width > max_width_m:
-            continue  # a round blob this wide is a plate or a box, not a screw (extract_regions finds it)
-        out.append(MapObject("point", xy, width, float(s[rr, cc])))
+        if not np.all(np.isfinite(off)) or np.any(np.abs(off) > 1.0):
+            off = np.zeros(2)  # a flat (saturated) top: the cell itself
+        xy = info.to_wall(np.array([[cc_k + off[0], rr_k + off[1]]]))
+        below = profile[k] <= (base[k] + 0.5 * bump[k])
+        first = np.where(below.any(axis=1), below.argmax(axis=1), len(steps) - 1)
+        half_width = float(np.median(steps[first])) * info.resolution
+        obj = MapObject("point", xy, 2.0 * half_width, float(bump[k]))
+        obj.features["base"] = float(base[k])
+        obj.features["half_width_m"] = half_width
+        out.append(obj)
     return out
 
 
@@ -556,9 +582,20 @@ def near_lines(lines: list[MapObject], info: GridInfo, clearance_m: float) -> ND
     return canvas.astype(bool)
 
 
-def drop_points_on_lines(points: list[MapObject], lines: list[MapObject],
-                         clearance_m: float = tol.JOIN_ENDPOINT_M * 0.5) -> list[MapObject]:
-    """Point peaks that lie on a line (where lines cross, or along a pipe) are that line, not fasteners."""
-    return [p for p in points
-            if all(_distance_to_polyline(p.points_m[0], ln.points_m) > max(clearance_m, ln.width_m)
-                   for ln in lines if ln.points_m.shape[0] >= 2)]
+POINT_END_M = 0.04  # a point this close to a line's end is where the line ends (a socket or junction box)
+
+
+def points_on_lines(points: list[MapObject], lines: list[MapObject],
+                    clearance_m: float = tol.JOIN_ENDPOINT_M * 0.5) -> tuple[list[MapObject], list[MapObject]]:
+    """(fasteners, boxes) of the point peaks given the lines: a peak where two lines meet or cross, or at a
+    line's end, is what the lines meet at (a box, a junction, the crossing itself: metal, not a fastener);
+    the others — alone or on one line's run — are fasteners."""
+    fasteners, boxes = [], []
+    for p in points:
+        q = p.points_m[0]
+        near = [ln for ln in lines if ln.points_m.shape[0] >= 2
+                and _distance_to_polyline(q, ln.points_m) <= max(clearance_m, ln.width_m)]
+        at_end = any(min(np.linalg.norm(q - ln.points_m[0]), np.linalg.norm(q - ln.points_m[-1])) <= POINT_END_M
+                     for ln in lines if ln.points_m.shape[0] >= 2)
+        (boxes if len(near) >= 2 or at_end else fasteners).append(p)
+    return fasteners, boxes

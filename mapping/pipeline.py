@@ -21,15 +21,15 @@ from mapping import tolerances as tol
 from mapping.depth import AcModel, estimate_depths
 from mapping.evidence import Coverage, coverage_radii, mapped_objects, sample_noise
 from mapping.fusion import METAL_CLASSES, TWO_SIDED_CHANNELS, UNKNOWN, Fuser, FusionParams, InductiveModel
-from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid
+from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid, additive_units
 from mapping.mapfile import MappedObject
 from mapping.objects import (
     MapObject,
-    drop_points_on_lines,
     extract_lines,
     extract_points,
     extract_regions,
     near_lines,
+    points_on_lines,
 )
 from mapping.stitching import FrameGraph, laser_constraints
 from scanner.log import DamagedLogError, ScanLog
@@ -318,9 +318,12 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
         for obj in found:
             lines += _without_duplicate_parts(obj, crests)
     points: list[MapObject] = []
+    boxes: list[MapObject] = []  # peaks where lines end or meet: the box or junction they meet at
     if "inductive" in grid.models:
-        points = extract_points(grid.signal("inductive"), grid.info, min_strength=settings.point_min_strength)
-        points = drop_points_on_lines(points, lines)
+        # in units where a screw on a pipe adds to the pipe (a saturated display would flatten it away)
+        points = extract_points(additive_units("inductive", grid.signal("inductive")), grid.info,
+                                min_strength=settings.point_min_strength)
+        points, boxes = points_on_lines(points, lines)
     non_metal: list[MapObject] = []
     if "capacitive" in grid.models and "inductive" in grid.models and sparse_data is None:
         non_metal = _non_metal_lines(grid, fuser, lines, points)
@@ -329,8 +332,8 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
     for ln in lines:
         near_metal_lines |= near_lines([ln], grid.info, max(0.04, 1.5 * ln.width_m))
     explained = near_metal_lines.copy()
-    if points:
-        explained |= near_lines([MapObject("line", np.repeat(p.points_m, 2, axis=0), 0.0) for p in points],
+    if points or boxes:
+        explained |= near_lines([MapObject("line", np.repeat(p.points_m, 2, axis=0), 0.0) for p in points + boxes],
                                 grid.info, 0.04)
     metal_regions: list[MapObject] = []
     if "inductive" in grid.models:  # metal areas: plates, steel studs
@@ -350,10 +353,11 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
                                    exclude=near_metal_lines, two_sided=CAP_TWO_SIDED)
     if sparse_data is not None:
         # the grid is too patchy for areas; the passes' lines are classified already
-        metal_found = lines + [_metal_named(fuser.classify(o)) for o in points]
+        metal_found = lines + [_metal_named(fuser.classify(o)) for o in points] + [_box(fuser, o) for o in boxes]
         capacitive: list[MapObject] = []
     else:
         metal_found = [_metal_named(fuser.classify(o)) for o in lines + points + metal_regions]
+        metal_found += [_box(fuser, o) for o in boxes]
         capacitive = [o for o in (fuser.classify(r) for r in regions) if o.cls != UNKNOWN]
     # a straight ridge of sheet metal (fusion's "metal", not a ridge merely named metal by its channel)
     metal_found = [_as_outline(o) if o.kind == "line" and o.cls == "metal" and len(o.points_m) == 2
@@ -418,6 +422,16 @@ def _metal_named(obj: MapObject) -> MapObject:
     cls = "fastener" if obj.kind == "point" else "metal"
     obj.cls, obj.confidence = cls, float(sum(obj.features.get(f"p_{c}", 0.0) for c in METAL_CLASSES))
     obj.features[NAMED_BY_CHANNEL] = 1.0
+    return obj
+
+
+def _box(fuser: Fuser, obj: MapObject) -> MapObject:
+    """A point peak where lines end or meet: metal (a socket or junction box, the crossing's own peak), never
+    a fastener — its class says only that the inductive channel sees metal there."""
+    fuser.classify(obj)
+    obj.cls, obj.confidence = "metal", float(sum(obj.features.get(f"p_{c}", 0.0) for c in METAL_CLASSES)) or 1.0
+    obj.features[NAMED_BY_CHANNEL] = 1.0
+    obj.features["at_line_end"] = 1.0
     return obj
 
 
