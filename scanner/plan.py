@@ -227,6 +227,9 @@ class AdaptiveConfig:
     # max_step_m) ahead is taken as the next crossing: the following pass measures the stretch up to it
     follow_rounds: int = 2  # re-crossings where a following pass lost the response, then the stretch is inferred
     follow_min_share: float = 0.7  # of the crossings' peak height: the following pass is still on the object
+    point_half_m: float = 0.04  # half length of the pass across an isolated find (a screw, a nail)
+    stud_min_height: float = 0.03  # capacitive peak height (display units) of a stud on a coarse pass ...
+    stud_min_width_m: float = 0.04  # ... and its least FWHM: wider than any cable's or pipe's echo
     follow_min_m: float = 0.01  # a stretch shorter than this between two crossings is covered by them
     end_tolerance_m: float = 0.015  # the following pass's response may fall this near a course's end
 
@@ -469,6 +472,38 @@ class AdaptivePlanner:
                 t = min(t, (lo[i] - p[i]) / d[i])
         return float(t)
 
+    def _studs(self, frame: FrameTarget, coarse: list[PassSpec], by_spec: dict[PassSpec, Samples],
+               owned_lo: float, owned_hi: float) -> list[PassSpec]:
+        """Fastener passes: one vertical pass along each stud (a wide capacitive peak on two or more horizontal
+        coarse passes at the same u, no inductive or AC find there), over the rows it was seen on and one row
+        spacing beyond."""
+        cfg = self.config
+        wide = PeakConfig(min_height=cfg.stud_min_height, min_prominence=0.5 * cfg.stud_min_height)
+        found: list[tuple[float, float]] = []  # (u, v)
+        for spec in coarse:
+            if spec.axis != "x":
+                continue
+            samples = by_spec[spec]
+            metal = [pos for pos, _, _ in self._find_channels(samples, "x")]
+            for peak in detect_peaks(samples["drive_u_m"], samples["capacitive"], wide):
+                if peak.width >= cfg.stud_min_width_m and all(abs(peak.position - m) > 0.03 for m in metal):
+                    found.append((peak.position, spec.start_uv[1]))
+        found.sort()
+        passes = []
+        while found:
+            u0 = found[0][0]
+            group = [f for f in found if abs(f[0] - u0) < 0.02]
+            found = [f for f in found if abs(f[0] - u0) >= 0.02]
+            u = float(np.mean([g[0] for g in group]))
+            if len(group) < 2 or not owned_lo <= u <= owned_hi:
+                continue
+            lo = max(0.0, min(g[1] for g in group) - cfg.coarse_row_spacing_m)
+            hi = min(self.wall.height_m, max(g[1] for g in group) + cfg.coarse_row_spacing_m)
+            spec = self._short(frame, "stud", "y", u, 0.5 * (lo + hi), 0.5 * (hi - lo))
+            if spec is not None:
+                passes.append(spec)
+        return passes
+
     def _oriented(self, spec: PassSpec) -> PassSpec:
         """The pass run from its end nearer the drives' position (short rapids); remembers where it ends."""
         a, b = np.array(spec.start_uv), np.array(spec.end_uv)
@@ -516,8 +551,13 @@ class AdaptivePlanner:
             results = yield [short]
             near = [c for c in self._crossing_points(short, next(iter(results.values())))
                     if abs(c[0][0 if spec.axis == "x" else 1] - pos) < cfg.confirm_half_length_m * 0.8]
-            if not near:
-                continue  # a point object (screw, nail) or an object parallel to the pass
+            if not near:  # a point object (screw, nail), an object's end or an object parallel to the pass:
+                # a short pass across the find in the other axis, so that a point response is seen in both
+                other = "y" if spec.axis == "x" else "x"
+                across = self._short(frame, "point", other, pos, fixed, cfg.point_half_m)
+                if across is not None:
+                    yield [self._oriented(across)]
+                continue
             p1, h1, ch1 = min(near, key=lambda c: float(np.linalg.norm(c[0] - p0)))
             d = (p1 - p0) / max(float(np.linalg.norm(p1 - p0)), 1e-9)
             chain = _Chain([p0, p1], [h1, h1], ch1)
@@ -531,6 +571,11 @@ class AdaptivePlanner:
                 yield from self._run_track(frame, tr, chains, queue, known)
         for tr in tracks:
             tr.stop = tr.stop or "stages"
+        # studs: a fastener pass along the centre of every wide capacitive response that no metal explains,
+        # found on two coarse rows or more
+        studs = self._studs(frame, coarse, by_spec, owned_lo, owned_hi)
+        if studs:
+            yield [self._oriented(p) for p in studs]
         # (4) following: a pass along every traced stretch; where the response falls, cross there and follow again
         for chain in chains:
             course = list(chain.points)
