@@ -35,8 +35,8 @@ from numpy.typing import NDArray
 from scipy import ndimage
 from scipy.special import expit
 
-from mapping.grid import GridInfo, WallGrid
-from mapping.objects import MapObject, normalise
+from mapping.grid import GridInfo, WallGrid, additive_units
+from mapping.objects import LINE_SIGMA_M, MapObject, _smooth_derivatives, normalise, ridge_width
 from scanner.sensor_model import points_in_polygon
 
 CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "non_metal", "cavity", "fastener")
@@ -56,9 +56,11 @@ class FusionParams:
     side_offset_m: float = 0.025  # where "beside the line" is measured
     metal_min_z: float = 6.0  # inductive height that says "metal here"
     # Depth-compensated inductive strength, relative to a 15 mm copper pipe at the same depth: copper cables
-    # are ~0.1, pipes 0.5–2, areas of sheet metal (plates, steel studs) seen as a ridge ≫ 2.
+    # are ~0.2, pipes 0.5–2.6 (a 32 mm steel pipe: 2.1/1.7 · 32/15), sheet metal seen as a ridge (a steel stud's
+    # 5 cm flange) ≥ 5, measured on the map in additive units (a saturated display widens the ridge: deeper, and so
+    # stronger still). The step sits at the two ranges' geometric mean.
     cable_max_ratio: float = 0.48
-    area_min_ratio: float = 8.0
+    area_min_ratio: float = 3.7
     # capacitive height (raised or lowered) that says "wood, water or a cavity": 4 σ, the level beyond which the
     # evidence layer (mapping.evidence.UNEXPLAINED_SIGMAS) calls a response something
     capacitive_min_z: float = 4.0
@@ -150,6 +152,7 @@ class Fuser:
         self.z: dict[str, NDArray[np.float64]] = {}
         self.signal: dict[str, NDArray[np.float64]] = {}
         self.background: dict[str, float] = {}
+        self._ridge: tuple | None = None  # the inductive map's smoothed height and Hessian in additive units
         for s in grid.sensors:
             self.signal[s] = grid.signal(s)
             self.z[s], self.background[s], _ = normalise(self.signal[s], s in TWO_SIDED_CHANNELS)
@@ -178,11 +181,31 @@ class Fuser:
             amp = float(_raw(peak) - _raw(self.background["inductive"]))
             seg = np.diff(obj.points_m, axis=0)
             main = seg[int(np.argmax(np.linalg.norm(seg, axis=1)))]
-            depth = self.inductive.depth_from_width(obj.width_m, main)
+            # the width in units where the footprint adds up: a shallow pipe's saturated display top widens
+            # its map ridge, which would put it deeper and make it stronger than a pipe
+            width = self._additive_width(pts, normals) if normals is not None else obj.width_m
+            depth = self.inductive.depth_from_width(width, main)
+            f["inductive_width_m"] = width
             f["inductive_raw"] = amp
             f["depth_est_m"] = depth
             f["strength_ratio"] = amp / self.inductive.pipe_peak_raw(depth, main)
         return f
+
+    def _additive_width(self, pts: NDArray[np.float64], normals: NDArray[np.float64]) -> float:
+        """Median half-maximum width (m) of the inductive ridge across a line's points (normals: unit, across),
+        measured as the line detector measures it (ridge_width) on the map in additive units."""
+        if self._ridge is None:
+            raw = additive_units("inductive", self.signal["inductive"])
+            z, _, _ = normalise(raw)
+            sigma_px = LINE_SIGMA_M / self.grid.info.resolution
+            s, _gx, _gy, hxx, hxy, hyy, _w = _smooth_derivatives(z, np.isfinite(raw), sigma_px)
+            self._ridge = (s, hxx, hxy, hyy, sigma_px)
+        s, hxx, hxy, hyy, sigma_px = self._ridge
+        info = self.grid.info
+        nx, ny = normals[:, 0], normals[:, 1]
+        curvature = (nx**2 * _sample(hxx, info, pts) + 2 * nx * ny * _sample(hxy, info, pts)
+                     + ny**2 * _sample(hyy, info, pts))
+        return float(np.median(ridge_width(_sample(s, info, pts), curvature, sigma_px, info)))
 
     def _median_inside(self, sensor: str, z: NDArray[np.float64], ring: NDArray[np.float64]) -> float:
         """Median z of the channel over the known cells whose centres lie inside the ring (k, 2); a ring too

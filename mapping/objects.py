@@ -132,7 +132,20 @@ def _smooth_derivatives(z: NDArray[np.float64], known: NDArray[np.bool_], sigma_
     return ndimage.gaussian_filter(s, d), gx, gy, gxx, gxy, gyy, w
 
 
-def ridge_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 0.006,
+LINE_SIGMA_M = 0.006  # smoothing of the line detector (ridge_points)
+
+
+def ridge_width(height: NDArray[np.float64], curvature: NDArray[np.float64], sigma_px: float,
+                info: GridInfo) -> NDArray[np.float64]:
+    """Half-maximum width (m) of a Gaussian ridge from its smoothed height and curvature across it (σ_total² =
+    h/|λ|, in cells²), without the smoothing (sigma_px, and the derivative filters' 1 cell) and the map's own
+    footprint (Gaussian splat + bilinear split)."""
+    sigma_total2 = np.maximum(height / np.maximum(-curvature, 1e-9), 0.0)
+    grid_px2 = (tol.SIGNAL_SPLAT_SIGMA_M / info.resolution) ** 2 + 1.0 / 6.0
+    return 2.3548 * np.sqrt(np.maximum(sigma_total2 - sigma_px**2 - 1.0 - grid_px2, 0.0)) * info.resolution
+
+
+def ridge_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = LINE_SIGMA_M,
                  min_strength: float = 6.0, polarity: float = 1.0, two_sided: bool = False) -> RidgePoints:
     """Steger ridge points of a signal map (height, width), NaN unknown; polarity −1 finds valleys.
 
@@ -172,11 +185,7 @@ def ridge_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 0
     xy = info.to_wall(np.column_stack([col_sub, row_sub]))
     direction = np.column_stack([-ny[rows, cols], nx[rows, cols]])
     height = s[rows, cols]
-    # Half-maximum width of a Gaussian ridge from height and curvature: h/|λ| = σ_total² (in cells²)
-    sigma_total = np.sqrt(np.maximum(height / np.maximum(-lam[rows, cols], 1e-9), 0.0))
-    # the map's own footprint (Gaussian splat + bilinear split) widened the ridge too
-    grid_px2 = (tol.SIGNAL_SPLAT_SIGMA_M / info.resolution) ** 2 + 1.0 / 6.0
-    width = 2.3548 * np.sqrt(np.maximum(sigma_total**2 - sigma_px**2 - 1.0 - grid_px2, 0.0)) * info.resolution
+    width = ridge_width(height, lam[rows, cols], sigma_px, info)
     return RidgePoints(xy, direction, height, width, np.column_stack([rows, cols]))
 
 
@@ -437,7 +446,7 @@ def _try_join(p: NDArray[np.float64], q: NDArray[np.float64], allow_bend: bool,
     return np.vstack([pp[:-1], x, qq[1:]])
 
 
-def extract_lines(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 0.006,
+def extract_lines(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = LINE_SIGMA_M,
                   min_strength: float = 6.0, two_sided: bool = False) -> list[MapObject]:
     """Pipes/cables (any straight, bent or diagonal run) in one signal map as 'line' MapObjects (two_sided:
     objects raise and lower the map, see background_level)."""

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from mapping import tolerances as tol
 from mapping.fusion import FusionParams, InductiveModel, _raw, _sigmoid
+from mapping.grid import additive_units
 from mapping.objects import MapObject, _join, distances_to_polyline
 from scanner.peaks import PeakConfig, detect_peaks, level_crossings
 
@@ -74,7 +75,7 @@ def pass_peaks(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: st
         srt = np.argsort(along)
         along, p, v = along[srt], p[srt], v[srt]
         for pk in detect_peaks(along, v, cfg):
-            height, width = _height_width(along, v, pk.position, global_base)
+            height, width = _height_width(along, v, pk.position, global_base, channel)
             if not np.isfinite(width):
                 continue  # the half-maximum lies beyond the pass's end: the centre is not trustworthy
             other = float(np.interp(pk.position, along, p[:, 1 - axis]))
@@ -93,15 +94,20 @@ def pass_peaks(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: st
 
 
 def _height_width(along: NDArray[np.float64], v: NDArray[np.float64], position: float,
-                  base: float) -> tuple[float, float]:
-    """(height over base, full width at half maximum) of the peak at `position` of the sorted profile."""
+                  base: float, channel: str = "") -> tuple[float, float]:
+    """(height over base, full width at half maximum) of the peak at `position` of the sorted profile; an
+    inductive peak's width in additive units (the footprint's own: a saturated display top is wider)."""
     k = int(np.clip(np.searchsorted(along, position), 0, len(along) - 1))
     lo, hi = max(0, k - 3), min(len(v), k + 4)
     top = float(np.median(np.sort(v[lo:hi])[-3:]))  # robust to one noisy sample
+    height = top - base
+    if channel == "inductive":
+        v = additive_units(channel, v)
+        top, base = (float(x) for x in additive_units(channel, np.array([top, base])))
     crossings = level_crossings(along, v, k, base + 0.5 * (top - base))
     if crossings is None:
-        return top - base, float("nan")
-    return top - base, crossings[1] - crossings[0]
+        return height, float("nan")
+    return height, crossings[1] - crossings[0]
 
 
 def _fit(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -44,10 +44,11 @@ def detect_peaks(coord: np.ndarray, values: np.ndarray, config: PeakConfig | Non
     step = grid_step_m or max(cfg.grid_step_m, float(np.median(np.diff(c))) if len(c) > 1 else cfg.grid_step_m)
     grid = np.arange(c[0], c[-1] + step / 2, step)
     y = np.interp(grid, c, v)
-    smooth = max(1, round(0.002 / step))  # 2 mm moving average against sample noise
+    # ~2 mm moving average against sample noise, of odd length: centred, so it shifts no peak
+    smooth = max(1, round(0.002 / step)) | 1
     if smooth > 1:
         kernel = np.ones(smooth) / smooth
-        y = np.convolve(np.pad(y, (smooth // 2, smooth - 1 - smooth // 2), mode="edge"), kernel, mode="valid")
+        y = np.convolve(np.pad(y, smooth // 2, mode="edge"), kernel, mode="valid")
     baseline = float(np.percentile(y, 20))
     above = y - baseline
     idx, _ = find_peaks(np.pad(above, 1, constant_values=0.0), height=cfg.min_height,

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from mapping import tolerances as tol
 from mapping.evaluate import truth_class
 from mapping.fusion import FusionParams, InductiveModel
+from mapping.grid import additive_units
 from mapping.objects import MapObject, distances_to_polyline
 from mapping.pipeline import ScanData
 from mapping.simscan import simulate_scan
@@ -210,12 +211,15 @@ def _noise_free_passes(wall: Wall, step_m: float) -> tuple[dict[str, NDArray], N
 
 
 def _display_fwhm(wall: Wall, x: float) -> tuple[float, float]:
-    """(half-maximum width m, height over the far baseline) of the noise-free display profile across x."""
+    """(half-maximum width m, height over the far baseline) of the noise-free profile across x: the width in
+    additive units (mapping.grid.additive_units, the footprint's own), the height in display units."""
     offsets = np.arange(-0.1, 0.1, 0.0001)
     profile = ForwardModel(wall).display(np.column_stack([x + offsets, np.full_like(offsets, 0.24)]))[:, 0]
     base = float(ForwardModel(Wall(wall.width_m, wall.height_m, wall.material)).display(np.array([[x, 0.24]]))[0, 0])
     top = int(np.argmax(profile))
-    left, right = level_crossings(offsets, profile, top, base + 0.5 * (profile[top] - base))
+    additive = additive_units("inductive", profile)
+    base_a = float(additive_units("inductive", np.array([base]))[0])
+    left, right = level_crossings(offsets, additive, top, base_a + 0.5 * (additive[top] - base_a))
     return right - left, float(profile[top] - base)
 
 
@@ -246,12 +250,6 @@ def test_pass_peaks_undo_the_inductive_lag(step_m):
     np.testing.assert_allclose(fixed.height, height, atol=0.01)
 
 
-PEAK_SHIFT_BUG = ("scanner/peaks.py:47-50 smooths with an even-length moving average (2 samples at 1 mm steps) "
-                  "padded asymmetrically, which shifts every peak by half a step toward +along; pass_peaks "
-                  "then places lines 0.5 mm off at 1 mm sampling (0.25 mm at the device's 0.25-0.5 mm)")
-
-
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=PEAK_SHIFT_BUG)
 def test_pass_peaks_are_unbiased_on_a_noise_free_symmetric_peak():
     samples, xy = _noise_free_passes(_pipe_wall(), 0.001)
     fixed = pass_peaks(samples, xy, "inductive", lag_m=SensorConfig().hysteresis_m)
@@ -354,12 +352,6 @@ def test_pipes_at_one_depth_get_one_depth_estimate_whatever_their_angle(plate):
     assert 2 ** (-1 / 3) < ratio < 2 ** (1 / 3)
 
 
-SPARSE_SATURATION_BUG = ("sparse.py:427 takes the passes' half-maximum widths in display units 1 - exp(-raw) "
-                         "as the raw footprint's: a copper pipe 2 cm deep (peak ≈ 0.8) comes out 3.1 cm deep "
-                         "with strength ratio 2.2 instead of 1")
-
-
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=SPARSE_SATURATION_BUG)
 def test_sparse_depth_and_strength_of_the_vertical_copper_pipe(plate):
     truth = plate.wall.by_id("pipe-vertical")
     (pipe,) = _along(_lines(plate), truth)
