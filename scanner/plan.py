@@ -33,12 +33,15 @@ from scanner.wall import Wall
 REACH_TOLERANCE_M = 1e-6
 STOPPING_RULE = (
     "Every object a coarse pass finds is traced along its course with crossings whose spacing grows with the "
-    "certainty of its direction, until it leaves the drives' reach, ends (no response on crossings down to "
-    "3 cm ahead nor on a square 4 cm around its last crossing) or meets a course already traced; a junction's "
-    "every branch is traced. Every traced stretch is then measured by a following pass along it; where that "
-    "pass's response falls below 70 % of the object's crossing peaks the object may have left its band "
-    "unseen, so it is crossed there and followed again (twice at most). What still falls is left inferred: the "
-    "drill check calls it unknown. Objects no coarse pass crosses are not traced.")
+    "certainty of its direction (a coarse pass's crossing that lies where the course is predicted counts as "
+    "one), until it leaves the drives' reach within a step, ends (no response on crossings down to 3 cm ahead "
+    "nor on a square 4 cm around its last crossing) or meets a course already traced; a junction's every branch "
+    "is traced. Every traced stretch, and its run on to the edge, is then measured by a following pass along "
+    "it; where that pass's response falls below 70 % of the object's crossing peaks (more than 1.5 cm from its "
+    "ends) the object may have left its band unseen, so it is crossed there and that stretch followed again "
+    "(twice at most). What still falls is left inferred: the drill check calls it unknown. Objects no coarse "
+    "pass crosses are not traced; studs (wide capacitive responses on two coarse rows) get one fastener pass "
+    "along their centre, isolated finds one short pass across them.")
 
 
 @dataclass
