@@ -591,7 +591,8 @@ def near_lines(lines: list[MapObject], info: GridInfo, clearance_m: float) -> ND
     return canvas.astype(bool)
 
 
-POINT_END_M = 0.04  # a point this close to a line's end is where the line ends (a socket or junction box)
+POINT_END_M = 0.04  # a point this close to a line's end is where the line ends (a socket or junction box, 6-7 cm)
+POINT_END_LATERAL_M = 0.015  # ... and on the line's course: a screw beside a line's end stays a fastener
 
 
 def points_on_lines(points: list[MapObject], lines: list[MapObject],
@@ -604,7 +605,18 @@ def points_on_lines(points: list[MapObject], lines: list[MapObject],
         q = p.points_m[0]
         near = [ln for ln in lines if ln.points_m.shape[0] >= 2
                 and _distance_to_polyline(q, ln.points_m) <= max(clearance_m, ln.width_m)]
-        at_end = any(min(np.linalg.norm(q - ln.points_m[0]), np.linalg.norm(q - ln.points_m[-1])) <= POINT_END_M
-                     for ln in lines if ln.points_m.shape[0] >= 2)
+        at_end = any(_beyond_end(q, ln.points_m) for ln in lines if ln.points_m.shape[0] >= 2)
         (boxes if len(near) >= 2 or at_end else fasteners).append(p)
     return fasteners, boxes
+
+
+def _beyond_end(q: NDArray[np.float64], poly: NDArray[np.float64]) -> bool:
+    """q lies within POINT_END_M of one of the polyline's ends, on its course (within POINT_END_LATERAL_M of
+    the end segment's line): where a cable runs into its box."""
+    for end, inner in ((poly[0], poly[1]), (poly[-1], poly[-2])):
+        d = end - inner
+        d = d / max(float(np.linalg.norm(d)), 1e-12)
+        r = q - end
+        if np.linalg.norm(r) <= POINT_END_M and abs(d[0] * r[1] - d[1] * r[0]) <= POINT_END_LATERAL_M:
+            return True
+    return False
