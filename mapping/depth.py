@@ -164,6 +164,8 @@ class _Pass:
     raw: NDArray[np.float64]
     sigma: NDArray[np.float64]  # noise of each raw reading
     saturated: NDArray[np.bool_]
+    lo: NDArray[np.float64] | None = None  # bounding box of xy (None: not computed)
+    hi: NDArray[np.float64] | None = None
 
     @property
     def normal(self) -> NDArray[np.float64]:
@@ -191,52 +193,111 @@ def _to_raw(display: NDArray[np.float64]) -> NDArray[np.float64]:
     return -np.log(np.clip(1.0 - display, 1e-6, 1.0))
 
 
-def _passes(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: str, lag_m: float) -> list[_Pass]:
+def _median(x: NDArray[np.float64]) -> float:
+    """np.median of a finite 1-D array (the same order statistics, without its per-call overhead)."""
+    n = x.size
+    h = n // 2
+    if n % 2:
+        return float(np.partition(x, h)[h])
+    part = np.partition(x, (h - 1, h))
+    return float((part[h - 1] + part[h]) / 2.0)
+
+
+def _pass_order(samples: dict[str, NDArray], xy: NDArray[np.float64]) -> NDArray[np.int64] | None:
+    """Indices of the samples with a finite position, ordered by pass, then by time (ties in their original
+    order); None without samples["pass_id"]."""
+    if "pass_id" not in samples:
+        return None
+    pids = np.asarray(samples["pass_id"])
+    okidx = np.flatnonzero(np.all(np.isfinite(xy), axis=1))
+    time = samples.get("time_s", samples.get("seq"))
+    if time is None:
+        return okidx[np.argsort(pids[okidx], kind="stable")]
+    return okidx[np.lexsort((np.asarray(time)[okidx], pids[okidx]))]
+
+
+def _passes(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: str, lag_m: float,
+            order: NDArray[np.int64] | None = None) -> list[_Pass]:
     """The channel's readings split into passes (needs samples["pass_id"]); positions moved back along the
-    motion by lag_m (the inductive hysteresis)."""
+    motion by lag_m (the inductive hysteresis). order: _pass_order(samples, xy), if known."""
     if channel not in samples or "pass_id" not in samples:
         return []
     values = np.asarray(samples[channel], dtype=np.float64)
     xy = np.asarray(xy, dtype=np.float64)
-    ok_all = np.isfinite(values) & np.all(np.isfinite(xy), axis=1)
-    if not ok_all.any():
+    if order is None:
+        order = _pass_order(samples, xy)
+    # the usable samples ordered by pass, then by time
+    sidx = order[np.isfinite(values[order])]
+    if sidx.size == 0:
         return []
-    background = float(np.percentile(_to_raw(values[ok_all]), 20))
-    time = samples.get("time_s", samples.get("seq"))
     groups = samples.get("frame_id")
     pids = np.asarray(samples["pass_id"])
-    order = np.argsort(pids, kind="stable")
-    starts = np.flatnonzero(np.r_[True, pids[order][1:] != pids[order][:-1]])
-    out = []
-    for idx in np.split(order, starts[1:]):
-        idx = idx[ok_all[idx]]
-        if idx.size < 20:
+    pk = pids[sidx]
+    same = pk[1:] == pk[:-1]
+    bounds = np.flatnonzero(np.r_[True, ~same, True])
+    # per-sample quantities in that order, computed once for all passes
+    display_all = values[sidx]
+    raw_all = _to_raw(display_all)
+    background = float(np.percentile(raw_all, 20))
+    raw_all -= background
+    saturated_all = display_all >= SATURATED_DISPLAY
+    # one count of quantisation is 1/(1 − display) in raw units: uniform, variance q²/12
+    quant_all = (1.0 / COUNTS_FULL_SCALE) / np.maximum(1.0 - display_all, 1e-3) / math.sqrt(12.0)
+    p_all = xy[sidx]
+    # each pass's bounding box (shifting by the lag after taking the extremes gives the same numbers)
+    p_lo = np.minimum.reduceat(p_all, bounds[:-1], axis=0)
+    p_hi = np.maximum.reduceat(p_all, bounds[:-1], axis=0)
+    group_ids = np.asarray(groups) if groups is not None else None
+    # each pass's direction of motion from its first and last sample (as one pass at a time would)
+    spans = list(itertools.pairwise(bounds.tolist()))
+    units = np.zeros((len(spans), 2))
+    kept = []
+    for k, (lo, hi) in enumerate(spans):
+        if hi - lo < 20:
             continue
-        if time is not None:
-            idx = idx[np.argsort(np.asarray(time)[idx], kind="stable")]
-        p = xy[idx]
-        motion = p[-1] - p[0]
+        motion = p_all[hi - 1] - p_all[lo]
         length = float(np.linalg.norm(motion))
         if length < 0.02:
             continue
-        unit = motion / length
-        p = p - lag_m * unit
-        t = (p - p[0]) @ unit
-        srt = np.argsort(t, kind="stable")
-        display = values[idx][srt]
-        raw = _to_raw(display) - background
-        saturated = display >= SATURATED_DISPLAY
+        units[k] = motion / length
+        kept.append(k)
+    if not kept:
+        return []
+    counts = np.diff(bounds)
+    p_all = p_all - lag_m * np.repeat(units, counts, axis=0)  # the lag undone along each pass's motion
+    rel_all = p_all - np.repeat(p_all[bounds[:-1]], counts, axis=0)
+    t_all = np.zeros(p_all.shape[0])
+    for k in kept:
+        lo, hi = spans[k]
+        t_all[lo:hi] = rel_all[lo:hi] @ units[k]
+    origins = p_all[bounds[:-1]].copy()  # the first sample in time
+    # passes not in order along their motion are sorted (stably, as one pass at a time)
+    back = np.flatnonzero((t_all[1:] < t_all[:-1]) & same) + 1
+    for k in np.unique(np.searchsorted(bounds, back, side="right") - 1).tolist():
+        lo, hi = spans[k]
+        srt = lo + np.argsort(t_all[lo:hi], kind="stable")
+        for arr in (t_all, p_all, raw_all, saturated_all, quant_all):
+            arr[lo:hi] = arr[srt]
+    white = np.zeros(len(spans))
+    passes = []
+    for k in kept:
+        lo, hi = spans[k]
+        raw, saturated = raw_all[lo:hi], saturated_all[lo:hi]
         good = ~saturated
-        if good.sum() < 20:
+        if np.count_nonzero(good) < 20:
             continue
         diffs = np.diff(raw[good])
-        white = 1.4826 * float(np.median(np.abs(diffs - np.median(diffs)))) / math.sqrt(2.0)
-        white = max(white, 1e-4)
-        # one count of quantisation is 1/(1 − display) in raw units: uniform, variance q²/12
-        quant = (1.0 / COUNTS_FULL_SCALE) / np.maximum(1.0 - display, 1e-3) / math.sqrt(12.0)
-        group = int(np.asarray(groups)[idx[0]]) if groups is not None else 0
-        out.append(_Pass(int(pids[idx[0]]), group, p[0].copy(), unit, t[srt], p[srt], raw,
-                         np.hypot(white, quant), saturated))
+        w = 1.4826 * _median(np.abs(diffs - _median(diffs))) / math.sqrt(2.0)
+        white[k] = max(w, 1e-4)
+        passes.append(k)
+    sigma_all = np.hypot(np.repeat(white, counts), quant_all)
+    out = []
+    for k in passes:
+        lo, hi = spans[k]
+        group = int(group_ids[sidx[lo]]) if group_ids is not None else 0
+        unit = units[k]
+        out.append(_Pass(int(pids[sidx[lo]]), group, origins[k], unit, t_all[lo:hi], p_all[lo:hi], raw_all[lo:hi],
+                         sigma_all[lo:hi], saturated_all[lo:hi], p_lo[k] - lag_m * unit, p_hi[k] - lag_m * unit))
     return out
 
 
@@ -259,10 +320,10 @@ class _Feature:
     sigma_t: float
 
 
-def _features_on_pass(targets: list[_Target], fp: Footprint, ps: _Pass, skip: tuple[int, int] | None,
-                      ) -> list[_Feature]:
-    """Peaks the pass should show from the mapped objects (lines crossing it, points beside it), except the
-    segment `skip` = (target index, segment index) being measured."""
+def _tagged_features(targets: list[_Target], fp: Footprint, ps: _Pass,
+                     lines: _LineTable | None = None) -> list[tuple[tuple[int, int], _Feature]]:
+    """Peaks the pass should show from the mapped objects (lines crossing it, points beside it), each with
+    its (target index, segment index), in that order. lines: the targets' segments (_LineTable) if known."""
     out = []
     for i, tg in enumerate(targets):
         obj = tg.obj
@@ -270,24 +331,89 @@ def _features_on_pass(targets: list[_Target], fp: Footprint, ps: _Pass, skip: tu
             rel = obj.points_m[0] - ps.origin
             var = fp.var_slice(ps.unit, tg.depth_guess)
             offset = abs(float(rel @ ps.normal))
-            if offset < 3.0 * math.sqrt(fp.var_slice(ps.normal, tg.depth_guess)) and skip != (i, 0):
-                out.append(_Feature(float(rel @ ps.unit), math.sqrt(var)))
-            continue
-        if obj.kind != "line":
-            continue
-        for j, (a, b) in enumerate(_segments(obj)):
-            if skip == (i, j):
-                continue
-            e = (b - a) / np.linalg.norm(b - a)
-            sin = _cross(ps.unit, e)
-            if abs(sin) < 0.2:
-                continue  # near-parallel: a plateau along the pass, taken by the background terms
-            t = _cross(a - ps.origin, e) / sin
-            s = float((ps.origin + t * ps.unit - a) @ e)
-            sig = math.sqrt(fp.var_across(np.array([-e[1], e[0]]), tg.depth_guess))
-            if -2.0 * sig <= s <= float(np.linalg.norm(b - a)) + 2.0 * sig:
-                out.append(_Feature(t, sig / abs(sin)))
+            if offset < 3.0 * math.sqrt(fp.var_slice(ps.normal, tg.depth_guess)):
+                out.append(((i, 0), _Feature(float(rel @ ps.unit), math.sqrt(var))))
+    lines = lines or _LineTable(targets, fp)
+    if lines.tags:
+        e, a = lines.e, lines.a
+        sin = ps.unit[0] * e[:, 1] - ps.unit[1] * e[:, 0]
+        rel = a - ps.origin
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (rel[:, 0] * e[:, 1] - rel[:, 1] * e[:, 0]) / sin
+        foot = ps.origin + t[:, None] * ps.unit - a
+        s = foot[:, 0] * e[:, 0] + foot[:, 1] * e[:, 1]
+        # near-parallel (|sin| < 0.2): a plateau along the pass, taken by the background terms
+        ok = (np.abs(sin) >= 0.2) & (-2.0 * lines.sig <= s) & (s <= lines.length + 2.0 * lines.sig)
+        for m in np.flatnonzero(ok).tolist():
+            out.append((lines.tags[m], _Feature(float(t[m]), float(lines.sig[m] / abs(sin[m])))))
+        out.sort(key=lambda f: f[0])  # target by target, as the objects are listed
     return out
+
+
+class _LineTable:
+    """The line targets' segments as arrays: start a, unit direction e, length, σ across at the depth guess."""
+
+    def __init__(self, targets: list[_Target], fp: Footprint) -> None:
+        self.tags: list[tuple[int, int]] = []
+        a, e, length, sig = [], [], [], []
+        for i, tg in enumerate(targets):
+            if tg.obj.kind != "line":
+                continue
+            for j, (p, q) in enumerate(_segments(tg.obj)):
+                d = (q - p) / np.linalg.norm(q - p)
+                self.tags.append((i, j))
+                a.append(p)
+                e.append(d)
+                length.append(float(np.linalg.norm(q - p)))
+                sig.append(math.sqrt(fp.var_across(np.array([-d[1], d[0]]), tg.depth_guess)))
+        self.a = np.array(a, dtype=np.float64).reshape(-1, 2)
+        self.e = np.array(e, dtype=np.float64).reshape(-1, 2)
+        self.length = np.array(length, dtype=np.float64)
+        self.sig = np.array(sig, dtype=np.float64)
+
+
+def _features_on_pass(targets: list[_Target], fp: Footprint, ps: _Pass, skip: tuple[int, int] | None,
+                      ) -> list[_Feature]:
+    """Peaks the pass should show from the mapped objects (lines crossing it, points beside it), except the
+    segment `skip` = (target index, segment index) being measured."""
+    return [f for tag, f in _tagged_features(targets, fp, ps) if tag != skip]
+
+
+class _PassSet:
+    """A channel's passes with their geometry as arrays (one row per pass: which passes cross or run along a
+    segment is then a few array operations) and, per pass, the peaks the mapped objects put on it, computed
+    once while the depth guesses hold (reset() when they change)."""
+
+    def __init__(self, passes: list[_Pass]) -> None:
+        self.passes = passes
+        n = len(passes)
+        self.origin = np.array([ps.origin for ps in passes], dtype=np.float64).reshape(n, 2)
+        self.unit = np.array([ps.unit for ps in passes], dtype=np.float64).reshape(n, 2)
+        self.t_first = np.array([ps.t[0] for ps in passes], dtype=np.float64)
+        self.t_last = np.array([ps.t[-1] for ps in passes], dtype=np.float64)
+        self.lo = np.array([ps.xy.min(axis=0) if ps.lo is None else ps.lo for ps in passes],
+                           dtype=np.float64).reshape(n, 2)
+        self.hi = np.array([ps.xy.max(axis=0) if ps.hi is None else ps.hi for ps in passes],
+                           dtype=np.float64).reshape(n, 2)
+        self._features: dict[int, list[tuple[tuple[int, int], _Feature]]] = {}
+        self._lines: _LineTable | None = None
+
+    def reset(self) -> None:
+        self._features.clear()
+        self._lines = None
+
+    def sin_to(self, e: NDArray[np.float64]) -> NDArray[np.float64]:
+        """_cross(unit, e) of every pass."""
+        return self.unit[:, 0] * e[1] - self.unit[:, 1] * e[0]
+
+    def features(self, k: int, targets: list[_Target], fp: Footprint, skip: tuple[int, int]) -> list[_Feature]:
+        """_features_on_pass of pass k."""
+        got = self._features.get(k)
+        if got is None:
+            if self._lines is None:
+                self._lines = _LineTable(targets, fp)
+            got = self._features[k] = _tagged_features(targets, fp, self.passes[k], self._lines)
+        return [f for tag, f in got if tag != skip]
 
 
 # ---- 1-D profile fit ----------------------------------------------------------------------------------------
@@ -443,35 +569,42 @@ def _near_sheet_metal(outlines: list[NDArray[np.float64]], pts: NDArray[np.float
     return False
 
 
-def _line_crossings(i: int, targets: list[_Target], passes: list[_Pass], fp: Footprint,
+def _line_crossings(i: int, targets: list[_Target], pset: _PassSet, fp: Footprint,
                     outlines: list[NDArray[np.float64]], max_crossings: int = 40) -> list[_Measurement]:
     tg = targets[i]
     segs = _segments(tg.obj)
-    found: list[tuple[float, _Pass, int, float, float, NDArray[np.float64]]] = []
+    found: list[tuple[float, int, int, float, float, NDArray[np.float64]]] = []
     for j, (a, b) in enumerate(segs):
         length = float(np.linalg.norm(b - a))
         e = (b - a) / length
         normal = np.array([-e[1], e[0]])
         sig = math.sqrt(fp.var_across(normal, tg.depth_guess))
-        for ps in passes:
-            sin = _cross(ps.unit, e)
-            if abs(sin) < MIN_CROSSING_SIN:
-                continue
-            t = _cross(a - ps.origin, e) / sin
-            s = float((ps.origin + t * ps.unit - a) @ e)
-            # an oblique pass runs along the line too: its peak's core (±MIN_SIDE_SIGMAS) must keep clear of
-            # the line's ends as well as its centre
-            margin = sig * (END_MARGIN_SIGMAS + MIN_SIDE_SIGMAS * math.sqrt(max(1.0 - sin * sin, 0.0)) / abs(sin))
-            reach = MIN_SIDE_SIGMAS * sig / abs(sin)
-            if margin <= s <= length - margin and ps.t[0] + reach <= t <= ps.t[-1] - reach:
-                found.append((s + 10.0 * j, ps, j, t, abs(sin), normal))
+        sin_all = pset.sin_to(e)
+        cand = np.flatnonzero(np.abs(sin_all) >= MIN_CROSSING_SIN)
+        if cand.size == 0:
+            continue
+        sin = sin_all[cand]
+        rel = a - pset.origin[cand]
+        t = (rel[:, 0] * e[1] - rel[:, 1] * e[0]) / sin
+        foot = pset.origin[cand] + t[:, None] * pset.unit[cand] - a
+        s = foot[:, 0] * e[0] + foot[:, 1] * e[1]
+        # an oblique pass runs along the line too: its peak's core (±MIN_SIDE_SIGMAS) must keep clear of
+        # the line's ends as well as its centre
+        abs_sin = np.abs(sin)
+        margin = sig * (END_MARGIN_SIGMAS + MIN_SIDE_SIGMAS * np.sqrt(np.maximum(1.0 - sin * sin, 0.0)) / abs_sin)
+        reach = MIN_SIDE_SIGMAS * sig / abs_sin
+        ok = ((margin <= s) & (s <= length - margin) & (pset.t_first[cand] + reach <= t)
+              & (t <= pset.t_last[cand] - reach))
+        for m in np.flatnonzero(ok).tolist():
+            found.append((float(s[m]) + 10.0 * j, int(cand[m]), j, float(t[m]), float(abs_sin[m]), normal))
     if len(found) > max_crossings:  # evenly along the object
         found.sort(key=lambda f: f[0])
         found = [found[k] for k in np.linspace(0, len(found) - 1, max_crossings).round().astype(int)]
     fits: dict[int, list[tuple[_Pass, _Fit]]] = {}
-    for _, ps, j, t, sin, normal in found:
+    for _, k, j, t, sin, normal in found:
+        ps = pset.passes[k]
         sig = math.sqrt(fp.var_across(normal, tg.depth_guess)) / sin
-        nbs = [f for f in _features_on_pass(targets, fp, ps, (i, j))
+        nbs = [f for f in pset.features(k, targets, fp, (i, j))
                if abs(f.t - t) < WINDOW_SIGMAS * sig + 2.5 * f.sigma_t]
         sel = _window(ps, t, sig, nbs)
         if sel is None:
@@ -509,19 +642,25 @@ def _refined_direction(centres: list[NDArray[np.float64]], e: NDArray[np.float64
     return d if float(d @ e) >= math.cos(math.radians(DIRECTION_MAX_CHANGE_DEG)) else e
 
 
-def _point_crossings(i: int, targets: list[_Target], passes: list[_Pass], fp: Footprint,
+def _point_crossings(i: int, targets: list[_Target], pset: _PassSet, fp: Footprint,
                      outlines: list[NDArray[np.float64]]) -> list[_Measurement]:
     tg = targets[i]
     centre = tg.obj.points_m[0]
     out = []
-    for ps in passes:
+    # passes within ~1σ of the point (across the pass) see ≥ 60 % of its peak; the passes clearly farther
+    # are dropped in a few array operations (with a margin: the test below decides)
+    rel_all = centre - pset.origin
+    offset = np.abs(rel_all[:, 1] * pset.unit[:, 0] - rel_all[:, 0] * pset.unit[:, 1])
+    x = (fp.spread * tg.depth_guess) ** 2
+    var = 1.0 / (pset.unit[:, 1] ** 2 / (fp.sigma_u_m**2 + x) + pset.unit[:, 0] ** 2 / (fp.sigma_v_m**2 + x))
+    for k in np.flatnonzero(offset <= np.sqrt(var) * (1.0 + 1e-9) + 1e-12).tolist():
+        ps = pset.passes[k]
         rel = centre - ps.origin
-        # passes within ~1σ of the point (across the pass) see ≥ 60 % of its peak
         if abs(float(rel @ ps.normal)) > math.sqrt(fp.var_slice(ps.normal, tg.depth_guess)):
             continue
         t = float(rel @ ps.unit)
         sig = math.sqrt(fp.var_slice(ps.unit, tg.depth_guess))
-        nbs = [f for f in _features_on_pass(targets, fp, ps, (i, 0))
+        nbs = [f for f in pset.features(k, targets, fp, (i, 0))
                if abs(f.t - t) < WINDOW_SIGMAS * sig + 2.5 * f.sigma_t]
         sel = _window(ps, t, sig, nbs)
         if sel is None:
@@ -540,14 +679,16 @@ def _point_crossings(i: int, targets: list[_Target], passes: list[_Pass], fp: Fo
     return out
 
 
-def _line_strips(i: int, targets: list[_Target], passes: list[_Pass], fp: Footprint) -> list[_Measurement]:
+def _line_strips(i: int, targets: list[_Target], pset: _PassSet, fp: Footprint) -> list[_Measurement]:
     """Cross profiles from passes running along a segment, per frame (see the module docstring)."""
     tg = targets[i]
     others = [t for k, t in enumerate(targets) if k != i and t.obj.kind in ("line", "point")]
     # samples nearer another object than 2.5x its footprint's larger σ are masked (crossing pipes, screws)
     mask_radius = [2.5 * math.sqrt(max(fp.sigma_u_m, fp.sigma_v_m) ** 2 + (fp.spread * t.depth_guess) ** 2)
                    for t in others]
-    other_boxes = [(t.obj.points_m.min(axis=0), t.obj.points_m.max(axis=0)) for t in others]
+    radius_arr = np.array(mask_radius, dtype=np.float64)[:, None]
+    other_lo = np.array([t.obj.points_m.min(axis=0) for t in others], dtype=np.float64).reshape(-1, 2)
+    other_hi = np.array([t.obj.points_m.max(axis=0) for t in others], dtype=np.float64).reshape(-1, 2)
     out = []
     for a, b in _segments(tg.obj):
         length = float(np.linalg.norm(b - a))
@@ -557,7 +698,12 @@ def _line_strips(i: int, targets: list[_Target], passes: list[_Pass], fp: Footpr
         half = max(WINDOW_SIGMAS * sig, STRIP_MIN_HALF_WIDTH_M)
         margin = END_MARGIN_SIGMAS * sig
         by_group: dict[int, list[tuple[float, float]]] = {}
-        for ps in passes:
+        # passes along the segment whose samples reach its strip (|s| ≤ half beside it) at all
+        lo_xy, hi_xy = np.minimum(a, b) - half - 1e-6, np.maximum(a, b) + half + 1e-6
+        along = ((np.abs(pset.sin_to(e)) < MIN_CROSSING_SIN) & np.all(pset.hi >= lo_xy, axis=1)
+                 & np.all(pset.lo <= hi_xy, axis=1))
+        for k in np.flatnonzero(along).tolist():
+            ps = pset.passes[k]
             if abs(_cross(ps.unit, e)) >= MIN_CROSSING_SIN:
                 continue
             rel = ps.xy - a
@@ -567,10 +713,18 @@ def _line_strips(i: int, targets: list[_Target], passes: list[_Pass], fp: Footpr
                 continue
             keep = np.flatnonzero(sel)
             lo_xy, hi_xy = ps.xy[keep].min(axis=0), ps.xy[keep].max(axis=0)
-            for o, radius, (o_lo, o_hi) in zip(others, mask_radius, other_boxes, strict=True):
-                if np.any(o_lo > hi_xy + radius) or np.any(o_hi < lo_xy - radius):
-                    continue  # too far from these samples to mask any of them
-                keep = keep[distances_to_polyline(ps.xy[keep], o.obj.points_m) > radius]
+            # the others too far from these samples to mask any of them are passed over
+            far = np.any(other_lo > hi_xy + radius_arr, axis=1) | np.any(other_hi < lo_xy - radius_arr, axis=1)
+            for m in np.flatnonzero(~far).tolist():
+                # only samples inside the other's box widened by the radius can lie within the radius of it
+                pts = ps.xy[keep]
+                reach = radius_arr[m] + 1e-9
+                near = np.flatnonzero(np.all(pts >= other_lo[m] - reach, axis=1)
+                                      & np.all(pts <= other_hi[m] + reach, axis=1))
+                if near.size:
+                    masked = np.zeros(keep.size, bool)
+                    masked[near] = ~(distances_to_polyline(pts[near], others[m].obj.points_m) > mask_radius[m])
+                    keep = keep[~masked]
                 if keep.size == 0:
                     break
             if keep.size < 20 or np.ptp(q[keep]) < 0.02:
@@ -769,7 +923,9 @@ def estimate_depths(objects: list[MapObject], grid: WallGrid, samples: dict[str,
     ac = ac or AcModel()
     fps = {"inductive": inductive_footprint(model), "ac": ac_footprint(ac)}
     xy = np.asarray(xy, dtype=np.float64)
-    passes = {"inductive": _passes(samples, xy, "inductive", lag_m), "ac": _passes(samples, xy, "ac", 0.0)}
+    order = _pass_order(samples, xy)
+    passes = {"inductive": _PassSet(_passes(samples, xy, "inductive", lag_m, order)),
+              "ac": _PassSet(_passes(samples, xy, "ac", 0.0, order))}
     outlines = [o.points_m for o in objects if o.kind == "outline" and o.features.get("polarity", 1.0) > 0
                 and o.cls == "metal"]
     wanted = [o for o in objects if o.kind in ("line", "point")]
@@ -781,6 +937,7 @@ def estimate_depths(objects: list[MapObject], grid: WallGrid, samples: dict[str,
                    if o.depth_m is None and (channel == "inductive" or _ac_first(o))]
         done: dict[int, tuple[float, float, float, int]] = {}
         for round_ in range(ROUNDS):
+            passes[channel].reset()  # the depth guesses moved: so did the peaks they put on each pass
             for k in pending:
                 ms = _measure(k, targets, passes[channel], fp, outlines, grid, channel,
                               FIRST_ROUND_CROSSINGS if round_ == 0 else MAX_CROSSINGS)
@@ -804,11 +961,11 @@ def estimate_depths(objects: list[MapObject], grid: WallGrid, samples: dict[str,
             obj.features["depth_channel_ac"] = 1.0 if channel == "ac" else 0.0
 
 
-def _measure(k: int, targets: list[_Target], passes: list[_Pass], fp: Footprint,
+def _measure(k: int, targets: list[_Target], passes: _PassSet, fp: Footprint,
              outlines: list[NDArray[np.float64]], grid: WallGrid, channel: str,
              max_crossings: int) -> list[_Measurement]:
     obj = targets[k].obj
-    if passes:
+    if passes.passes:
         if obj.kind == "point":
             return _point_crossings(k, targets, passes, fp, outlines)
         return (_line_crossings(k, targets, passes, fp, outlines, max_crossings)

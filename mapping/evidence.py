@@ -31,7 +31,6 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from geometry.errors import InputError
 from mapping import tolerances as tol
@@ -51,6 +50,7 @@ CHANNEL_SEES = {"inductive": "metal (pipes, cables, screws, plates)",
 COVERAGE_RADIUS_SIGMAS = 0.6
 DEFAULT_COVERAGE_RADIUS_M = {"inductive": 0.6 * 0.011, "capacitive": 0.6 * 0.022, "ac": 0.6 * 0.004}
 _DEDUPE_M = 0.0005  # sample positions are merged on this raster before the nearest-sample search
+_PAIRS_PER_CHUNK = 1 << 20  # nearest-sample search: (raster column, cell row) pairs handled at a time
 
 
 def coverage_radii(sensor_meta: dict | None) -> dict[str, float]:
@@ -71,7 +71,9 @@ def sample_distance(info: GridInfo, xy: ArrayLike, max_radius_m: float) -> NDArr
     """(height, width) distance from each cell centre to the nearest position of xy (n, 2) wall metres, less
     the merging error (a conservative figure); inf beyond max_radius_m."""
     p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    p = p[np.all(np.isfinite(p), axis=1)]
+    finite = np.all(np.isfinite(p), axis=1)
+    if not finite.all():
+        p = p[finite]
     out = np.full(info.shape, np.inf)
     if p.size == 0:
         return out
@@ -82,22 +84,61 @@ def sample_distance(info: GridInfo, xy: ArrayLike, max_radius_m: float) -> NDArr
     ix = np.floor((p[:, 0] - x0) / _DEDUPE_M).astype(np.int64)
     iy = np.floor((p[:, 1] - y0) / _DEDUPE_M).astype(np.int64)
     ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
-    if not ok.any():
+    if not ok.all():
+        ix, iy = ix[ok], iy[ok]
+    if ix.size == 0:
         return out
+    # raster column by column: the merged positions sorted by (column, row)
     fine = np.zeros(nx * ny, bool)
-    fine[iy[ok] * nx + ix[ok]] = True
-    flat = np.flatnonzero(fine)
-    points = np.column_stack([x0 + (flat % nx + 0.5) * _DEDUPE_M, y0 + (flat // nx + 0.5) * _DEDUPE_M])
+    fine[ix * ny + iy] = True
+    keys = np.flatnonzero(fine)
+    del fine
+    px = x0 + (np.arange(nx) + 0.5) * _DEDUPE_M  # the merged positions' coordinates, per raster column / row
+    py = y0 + (np.arange(ny) + 0.5) * _DEDUPE_M
+    col_of, row_of = keys // ny, keys % ny
     xs, ys = info.cell_centres()
-    lo, hi = points.min(axis=0) - max_radius_m, points.max(axis=0) + max_radius_m
+    lo = np.array([px[col_of.min()], py[row_of.min()]]) - max_radius_m
+    hi = np.array([px[col_of.max()], py[row_of.max()]]) + max_radius_m
     ci = np.flatnonzero((xs >= lo[0]) & (xs <= hi[0]))
     ri = np.flatnonzero((ys >= lo[1]) & (ys <= hi[1]))
     if ci.size == 0 or ri.size == 0:
         return out
-    gx, gy = np.meshgrid(xs[ci], ys[ri])
-    d, _ = cKDTree(points).query(np.column_stack([gx.ravel(), gy.ravel()]), distance_upper_bound=max_radius_m)
+    qx, qy = xs[ci], ys[ri]
+    # The nearest position by the exact lower envelope (what a k-d tree finds, in a few array operations):
+    # per cell row and raster column the nearest merged row (the last at or below the centre or the first
+    # above), then per cell the nearest over the raster columns within the radius. Squared distances are
+    # summed as dx² + dy², so the minimum is the same number the tree gives.
+    split = np.searchsorted(py, qy, side="right")  # raster rows [0, split) lie at or below each cell row
+    cols = np.flatnonzero(np.bincount(col_of, minlength=nx))  # raster columns holding any position
+    dy2 = np.empty((split.size, cols.size))  # (cell rows, occupied raster columns)
+    step = max(1, _PAIRS_PER_CHUNK // split.size)
+    for c0 in range(0, cols.size, step):
+        cc = cols[c0:c0 + step]
+        q = (cc[:, None] * ny + split[None, :]).ravel()  # (column, cell row) pairs, sorted
+        pos = np.searchsorted(keys, q, side="left")
+        col_q = np.repeat(cc, split.size)
+        qy_q = np.tile(qy, cc.size)
+        best = np.full(q.size, np.inf)
+        for cand in (pos, pos - 1):  # the first merged row at or above the split, and the last below it
+            c = np.clip(cand, 0, keys.size - 1)
+            same = (cand >= 0) & (cand < keys.size) & (col_of[c] == col_q)
+            dy = py[row_of[c]] - qy_q
+            best = np.where(same, np.minimum(best, dy * dy), best)
+        dy2[:, c0:c0 + step] = best.reshape(cc.size, split.size).T
+    pcx = px[cols]
+    first = np.searchsorted(pcx, qx - max_radius_m, side="left")
+    last = np.searchsorted(pcx, qx + max_radius_m, side="right")
+    d2 = np.full((ri.size, ci.size), np.inf)
+    for k in range(int((last - first).max(initial=0))):
+        j = first + k
+        use = j < last
+        jj = np.minimum(j, cols.size - 1)
+        dx = pcx[jj] - qx
+        cand = (dx * dx)[None, :] + dy2[:, jj]
+        d2 = np.where(use[None, :], np.minimum(d2, cand), d2)
+    d = np.where(d2 < max_radius_m * max_radius_m, np.sqrt(d2), np.inf)
     # a merged position is within half a raster diagonal of the real one: count it that much farther
-    out[np.ix_(ri, ci)] = d.reshape(len(ri), len(ci)) + 0.7072 * _DEDUPE_M
+    out[np.ix_(ri, ci)] = d + 0.7072 * _DEDUPE_M
     return out
 
 
@@ -170,18 +211,65 @@ def sample_noise(readings: NDArray[np.float64], pass_id: NDArray[np.int64], sens
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
 
 
-def _nnls_tall(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """min ‖Ax − b‖ with x ≥ 0 for tall A (many cells, few columns), through its small Gram matrix: the same
-    minimiser, since ‖Ax − b‖² = ‖Rx − R⁻ᵀAᵀb‖² + const with AᵀA = RᵀR."""
+def _nnls_gram(gram: NDArray[np.float64], atb: NDArray[np.float64]) -> NDArray[np.float64]:
+    """min ‖Ax − b‖ with x ≥ 0 for tall A (many cells, few columns), from its small Gram matrix AᵀA and Aᵀb:
+    the same minimiser, since ‖Ax − b‖² = ‖Rx − R⁻ᵀAᵀb‖² + const with AᵀA = RᵀR."""
     from scipy.linalg import cho_factor, solve_triangular
     from scipy.optimize import nnls
 
-    gram = A.T @ A
+    gram = gram.copy()
     gram[np.diag_indices_from(gram)] += 1e-10 * max(float(np.trace(gram)), 1e-30)  # kernels at near widths
     R = cho_factor(gram, lower=False)[0]
     R = np.triu(R)
-    rhs = solve_triangular(R, A.T @ b, trans="T")
+    rhs = solve_triangular(R, atb, trans="T")
     return nnls(R, rhs, maxiter=_NNLS_MAX_ITER)[0]
+
+
+@dataclass
+class _Block:
+    """An object's kernel columns (its footprint-blurred shape at each of _KERNEL_SCALES): values on the box
+    of cells its footprint reaches (rows, cols), zero elsewhere."""
+
+    rows: slice
+    cols: slice
+    values: NDArray[np.float64]  # (len(_KERNEL_SCALES), box height, box width)
+
+
+def _overlap(p: slice, q: slice) -> slice | None:
+    lo, hi = max(p.start, q.start), min(p.stop, q.stop)
+    return slice(lo, hi) if lo < hi else None
+
+
+def _fit_system(blocks: list[_Block], fit_mask: NDArray[np.bool_], target: NDArray[np.float64],
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float, int]:
+    """AᵀA, Aᵀb of the kernel columns over the fit cells (b = target there), each column's sum over them, Σb
+    and their count: the normal equations, from the overlaps of the blocks' boxes alone (columns vanish
+    outside their box)."""
+    n_s = len(_KERNEL_SCALES)
+    n = len(blocks) * n_s
+    gram, atb, sums = np.zeros((n, n)), np.zeros(n), np.zeros(n)
+    b = np.where(fit_mask, target, 0.0)
+    w = fit_mask.astype(np.float64)
+    for k, bk in enumerate(blocks):
+        kk = slice(k * n_s, (k + 1) * n_s)
+        wk = w[bk.rows, bk.cols]
+        vk = bk.values * wk  # the column over the fit cells only
+        atb[kk] = np.einsum("ihw,hw->i", vk, b[bk.rows, bk.cols])
+        sums[kk] = np.einsum("ihw->i", vk)
+        for m in range(k, len(blocks)):
+            bm = blocks[m]
+            rows, cols = _overlap(bk.rows, bm.rows), _overlap(bk.cols, bm.cols)
+            if rows is None or cols is None:
+                continue
+            sub_k = vk[:, rows.start - bk.rows.start:rows.stop - bk.rows.start,
+                       cols.start - bk.cols.start:cols.stop - bk.cols.start]
+            sub_m = bm.values[:, rows.start - bm.rows.start:rows.stop - bm.rows.start,
+                              cols.start - bm.cols.start:cols.stop - bm.cols.start]
+            g = np.einsum("ihw,jhw->ij", sub_k, sub_m)
+            mm = slice(m * n_s, (m + 1) * n_s)
+            gram[kk, mm] = g
+            gram[mm, kk] = g.T
+    return gram, atb, sums, float(b.sum()), int(fit_mask.sum())
 
 
 def unexplained_cells(grid: WallGrid, sensor: str, objects: list[MapObject], covered: NDArray[np.bool_],
@@ -201,7 +289,7 @@ def unexplained_cells(grid: WallGrid, sensor: str, objects: list[MapObject], cov
         return out
     y = _as_raw(sensor, signal)
     xs, ys = grid.info.cell_centres()
-    columns: list[NDArray[np.float64]] = []
+    blocks: list[_Block] = []
     splat = tol.SIGNAL_SPLAT_SIGMA_M  # the grid's own Gaussian splat widens every footprint
     for obj in objects:
         if obj.cls not in _CHANNEL_SEES_CLASS.get(sensor, ()):
@@ -216,18 +304,19 @@ def unexplained_cells(grid: WallGrid, sensor: str, objects: list[MapObject], cov
             continue
         d = _distance_field(obj, xs[ci], ys[ri])
         sign = -1.0 if (sensor == "capacitive" and obj.cls == "cavity") else 1.0
-        for scale in _KERNEL_SCALES:
-            col = np.zeros(grid.info.shape)
-            col[np.ix_(ri, ci)] = sign * np.exp(-0.5 * (d / (base * scale)) ** 2)
-            columns.append(col)
+        # the cell centres are sorted: ri and ci are ranges
+        blocks.append(_Block(slice(int(ri[0]), int(ri[-1]) + 1), slice(int(ci[0]), int(ci[-1]) + 1),
+                             np.stack([sign * np.exp(-0.5 * (d / (base * scale)) ** 2)
+                                       for scale in _KERNEL_SCALES])))
+    n_columns = len(blocks) * len(_KERNEL_SCALES)
     sparse = np.zeros(grid.info.shape, bool)
     sparse[::_FIT_STRIDE, ::_FIT_STRIDE] = True
-    fit_mask = known & sparse if (known & sparse).sum() >= len(columns) + 10 else known.copy()
+    fit_mask = known & sparse if (known & sparse).sum() >= n_columns + 10 else known.copy()
     # The empty wall's level from the cells no object's footprint reaches, where there are enough of them: a
     # free constant would trade itself against the kernels' tails.
     reach = np.zeros(grid.info.shape, bool)
-    for col in columns:
-        reach |= np.abs(col) > 1e-3
+    for bl in blocks:
+        reach[bl.rows, bl.cols] |= np.any(np.abs(bl.values) > 1e-3, axis=0)
     far = known & ~reach
     level: float | None = None
     if far.sum() >= _MIN_BACKGROUND_CELLS:
@@ -237,19 +326,27 @@ def unexplained_cells(grid: WallGrid, sensor: str, objects: list[MapObject], cov
         # 1.28 σ below its level), as long as a tenth of the cells are empty
         level = float(np.percentile(y[known], 10)) + 1.2816 * noise_sigma
     for _ in range(_ROBUST_ROUNDS + 1):
-        if not columns:
+        if not blocks:
             coef = np.array([float(np.median(y[fit_mask])) if level is None else level])
         elif level is None:  # a free constant as two non-negative columns, ±1
-            ones = np.ones(int(fit_mask.sum()))
-            x = _nnls_tall(np.column_stack([ones, -ones] + [c[fit_mask] for c in columns]), y[fit_mask])
+            gram_k, atb_k, sums, total, count = _fit_system(blocks, fit_mask, y)
+            gram = np.zeros((n_columns + 2, n_columns + 2))
+            gram[:2, :2] = [[count, -count], [-count, count]]
+            gram[0, 2:], gram[1, 2:] = sums, -sums
+            gram[2:, 0], gram[2:, 1] = sums, -sums
+            gram[2:, 2:] = gram_k
+            x = _nnls_gram(gram, np.concatenate([[total, -total], atb_k]))
             coef = np.concatenate([[x[0] - x[1]], x[2:]])
         else:
-            x = _nnls_tall(np.column_stack([c[fit_mask] for c in columns]), y[fit_mask] - level)
+            gram, atb, _, _, _ = _fit_system(blocks, fit_mask, y - level)
+            x = _nnls_gram(gram, atb)
             coef = np.concatenate([[level], x])
         predicted = np.zeros(grid.info.shape)
-        for c, col in zip(coef[1:], columns, strict=True):
-            if c != 0.0:
-                predicted += c * col
+        for k, bl in enumerate(blocks):
+            for c, values in zip(coef[1 + k * len(_KERNEL_SCALES):1 + (k + 1) * len(_KERNEL_SCALES)], bl.values,
+                                 strict=True):
+                if c != 0.0:
+                    predicted[bl.rows, bl.cols] += c * values
         residual = np.where(known, y - coef[0] - predicted, 0.0)
         spread = noise_sigma if np.isfinite(noise_sigma) and noise_sigma > 0 else \
             1.4826 * float(np.median(np.abs(residual[known] - np.median(residual[known]))))
