@@ -23,6 +23,7 @@ from mapping.objects import MapObject, _join, distances_to_polyline
 from scanner.peaks import PeakConfig, detect_peaks, level_crossings
 
 RANSAC_INLIER_M = 0.004  # a peak this close to a line belongs to it
+MIN_CROSSING_SIN = float(np.sin(np.radians(20.0)))  # ... if its pass crosses the line at 20° or more
 RANSAC_PAIRS = 400
 MIN_PEAKS_PER_LINE = 3
 MAX_GAP_M = 0.40  # peaks of one run are at most this far apart along the line (coarse passes: 25 cm)
@@ -133,15 +134,21 @@ def ransac_lines(peaks: PassPeaks, seed: int = 0) -> list[tuple[NDArray[np.float
         a, d, length = a[good], d[good], length[good]
         n = np.column_stack([-d[:, 1], d[:, 0]]) / length[:, None]
         dist = np.abs(np.einsum("hj,hnj->hn", n, p[None, :, :] - p[a][:, None, :]))  # (hypotheses, points)
-        counts = (dist < RANSAC_INLIER_M).sum(axis=1)
+        axis = peaks.axis[remaining]
+        # a peak is a crossing of the line only if its pass crosses it: a pass along a stud sees the stud's nails
+        # one after another, peaks in a row that are no line
+        u_h = d / length[:, None]
+        crossing = np.abs(np.where(axis[None, :] == 0, u_h[:, 1:2], u_h[:, 0:1])) >= MIN_CROSSING_SIN
+        counts = ((dist < RANSAC_INLIER_M) & crossing).sum(axis=1)
         best = int(np.argmax(counts))
         if counts[best] < MIN_PEAKS_PER_LINE:
             break
-        inl = dist[best] < RANSAC_INLIER_M
+        inl = (dist[best] < RANSAC_INLIER_M) & crossing[best]
         for _ in range(2):  # least squares on the inliers, then re-collect them
             c, u = _fit(p[inl])
             nrm = np.array([-u[1], u[0]])
-            inl = np.abs((p - c) @ nrm) < RANSAC_INLIER_M
+            crosses = np.abs(np.where(axis == 0, u[1], u[0])) >= MIN_CROSSING_SIN
+            inl = (np.abs((p - c) @ nrm) < RANSAC_INLIER_M) & crosses
             if inl.sum() < 2:
                 break
         idx = remaining[inl]
@@ -160,6 +167,60 @@ def ransac_lines(peaks: PassPeaks, seed: int = 0) -> list[tuple[NDArray[np.float
     return runs
 
 
+ALONG_LATERAL_M = 0.006  # samples of a pass this close to a run's centre line measure it (a line 6 mm aside still
+# gives 86 % of its level: the inductive footprint σ across is 11 mm)
+ALONG_BIN_M = 0.01  # ... in bins this long
+ALONG_MIN_COVER = 0.5  # a run is judged along its length where passes along it cover this share of its bins
+ALONG_MAX_LOW = 0.5  # ... and is no line where more than this share of them falls below half its peaks' height
+
+
+SHORT_RUN_M = 0.10  # runs shorter than this may be one point crossed by a few passes at its flanks
+
+
+def _a_point_seen_by_its_flanks(poly: NDArray[np.float64], tops: NDArray[np.float64], baseline: float,
+                                channel: str) -> bool:
+    """A short run whose crossings differ more than twofold in height (additive units, over the background) is a
+    point crossed by passes at its centre and its flanks, not a line: a line's crossings keep its level (gain
+    jitter 2 %, the footprint's anisotropy 1.45 at most between crossing angles)."""
+    if float(np.linalg.norm(poly[1] - poly[0])) >= SHORT_RUN_M or len(tops) < 2:
+        return False
+    base = float(additive_units(channel, np.array([baseline]))[0])
+    h = additive_units(channel, np.asarray(tops, dtype=np.float64)) - base
+    return bool(h.min() < 0.5 * h.max())
+
+
+def _refuted_along(poly: NDArray[np.float64], height: float, baseline: float, xy: NDArray[np.float64],
+                   values: NDArray[np.float64], axis: NDArray) -> bool:
+    """A straight run of peaks that passes running along it show is no line: the nails of a stud, crossed one
+    by one by short passes, line up like a cable, but a pass along the stud falls to nothing between them where
+    a cable keeps its level. Only passes parallel to the run (or following passes) count."""
+    u = poly[1] - poly[0]
+    length = float(np.linalg.norm(u))
+    if length < 2 * ALONG_BIN_M:
+        return False
+    u = u / length
+    parallel = np.where(axis == 0, abs(u[1]) < MIN_CROSSING_SIN, np.where(axis == 1, abs(u[0]) < MIN_CROSSING_SIN,
+                                                                          True))
+    rel = xy - poly[0]
+    t = rel @ u
+    off = np.abs(rel[:, 0] * u[1] - rel[:, 1] * u[0])
+    near = parallel & np.isfinite(values) & (off <= ALONG_LATERAL_M) & (t >= 0.0) & (t <= length)
+    if not near.any():
+        return False
+    bins = np.minimum((t[near] / ALONG_BIN_M).astype(np.int64), int(length / ALONG_BIN_M))
+    n_bins = int(length / ALONG_BIN_M) + 1
+    top = np.full(n_bins, -np.inf)
+    np.maximum.at(top, bins, values[near])
+    covered = np.isfinite(top)
+    if covered.sum() < ALONG_MIN_COVER * n_bins:
+        return False
+    low = top - baseline < 0.5 * height
+    # a line keeps its level over its whole run, out to its last crossings (a single nail seen by a few passes
+    # makes a run a few cm long that falls off at both ends)
+    ends_low = covered[0] and covered[-1] and bool(low[0] or low[-1])
+    return bool(low[covered].mean() > ALONG_MAX_LOW or ends_low)
+
+
 def lines_from_passes(samples: dict[str, NDArray], xy: NDArray[np.float64], lag_m: float,
                       inductive: InductiveModel, params: FusionParams) -> list[MapObject]:
     """Classified line objects from the passes of a (sparse) scan."""
@@ -173,7 +234,8 @@ def lines_from_passes(samples: dict[str, NDArray], xy: NDArray[np.float64], lag_
     if "inductive" in samples:
         ind = pass_peaks(samples, xy, "inductive", lag_m, min_height=0.04)
         kept = list(objects)
-        for obj in _build(ind, "inductive", inductive, params):
+        along = (xy, samples["inductive"], samples["axis"])
+        for obj in _build(ind, "inductive", inductive, params, along):
             pts = np.vstack([obj.points_m[0] + t * (obj.points_m[-1] - obj.points_m[0])
                              for t in np.linspace(0, 1, 11)])
             if kept and np.min([distances_to_polyline(pts, k.points_m) for k in kept], axis=0).mean() < 0.015:
@@ -182,8 +244,14 @@ def lines_from_passes(samples: dict[str, NDArray], xy: NDArray[np.float64], lag_
     return objects
 
 
-def _build(peaks: PassPeaks, channel: str, model: InductiveModel, params: FusionParams) -> list[MapObject]:
+def _build(peaks: PassPeaks, channel: str, model: InductiveModel, params: FusionParams,
+           along: tuple[NDArray[np.float64], NDArray[np.float64], NDArray] | None = None) -> list[MapObject]:
     runs = ransac_lines(peaks)
+    runs = [r for r in runs if not _a_point_seen_by_its_flanks(r[0], peaks.height[r[1]] + peaks.baseline,
+                                                               peaks.baseline, channel)]
+    if along is not None:
+        runs = [r for r in runs if not _refuted_along(r[0], float(np.median(peaks.height[r[1]])), peaks.baseline,
+                                                      *along)]
     if not runs:
         return []
     polys = [r[0] for r in runs]

@@ -311,11 +311,18 @@ def test_sparse_scan_of_the_paper_plate_gives_its_lines_positions_angles_and_cla
         assert line.length_m() >= truth.length() - 2 * COARSE_SPACING_M / crossing - 2 * LINE_POSITION_M
     cord = _along(objects, plate.wall.by_id("extension-cord"))[0]
     assert cord.features["source"] == 1.0  # placed by its AC crest, which has no lag
-    # nothing is drawn where the wall has nothing (the mounting plate may show as a short ridge)
-    truth_shapes = [o.geometry_m if o.points_m is not None else np.vstack([o.outline_m, o.outline_m[:1]])
-                    for o in plate.wall.objects]
+    # nothing is drawn where the wall has nothing (the mounting plate may show as a short ridge on it)
+    from scanner.sensor_model import points_in_polygon
+
+    def off_truth(p: np.ndarray, o) -> np.ndarray:
+        if o.points_m is not None:
+            return distances_to_polyline(p, o.geometry_m)
+        ring = np.vstack([o.outline_m, o.outline_m[:1]])
+        return np.where(points_in_polygon(p, o.outline_m), 0.0, distances_to_polyline(p, ring))
+
     for obj in objects:
-        assert min(distances_to_polyline(densify(obj.points_m, 0.01), g).max() for g in truth_shapes) < 0.015
+        p = densify(obj.points_m, 0.01)
+        assert min(off_truth(p, o).max() for o in plate.wall.objects) < 0.015
 
 
 def test_without_the_ac_channel_the_cable_is_told_by_its_weak_copper(plate):
@@ -360,3 +367,45 @@ def test_sparse_depth_and_strength_of_the_vertical_copper_pipe(plate):
     assert 0.5 < pipe.features["strength_ratio"] < 2.0
     d0 = plate.model.depth_offset_m  # the ratio scales with (depth + d0)³
     assert 2 ** (-1 / 3) < (pipe.features["depth_est_m"] + d0) / (truth.depth_m + d0) < 2 ** (1 / 3)
+
+
+def _passes(wall: Wall, lines: list[tuple[int, NDArray[np.float64], NDArray[np.float64]]],
+            seed: int) -> tuple[dict[str, NDArray], NDArray[np.float64]]:
+    """Passes (axis, start, end) over `wall` at 1 mm steps, forward-model readings with the sensor's noise."""
+    model = ForwardModel(wall)
+    rng = np.random.default_rng(seed)
+    cols: dict[str, list[NDArray]] = {k: [] for k in ("pass_id", "axis", "direction", "inductive")}
+    positions = []
+    for k, (axis, a, b) in enumerate(lines):
+        n = int(np.linalg.norm(b - a) / 0.001) + 1
+        xy = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+        u = (b - a) / np.linalg.norm(b - a)
+        reading = model.display(xy, np.tile(u, (n, 1)), rng=rng)[:, 0]
+        for key, value in (("pass_id", k), ("axis", axis), ("direction", 1 if u[axis] > 0 else -1)):
+            cols[key].append(np.full(n, value, dtype=np.int64))
+        cols["inductive"].append(reading)
+        positions.append(xy)
+    return {k: np.concatenate(v) for k, v in cols.items()}, np.vstack(positions)
+
+
+@pytest.mark.parametrize("kind", ["nail", "cable"])
+def test_nails_in_a_row_are_no_line_but_a_cable_crossed_the_same_way_is(kind):
+    # the adaptive plan's fastener pass runs along a stud and crosses each nail it finds with a short pass;
+    # peaks in a row, as a cable's crossings would be: the pass along them tells the two apart
+    x, ys = 0.30, np.array([0.10, 0.40, 0.70])
+    if kind == "nail":
+        objects = [WallObject("nail", f"nail-{k}", 0.004, points_m=np.array([[x, y]])) for k, y in enumerate(ys)]
+    else:
+        objects = [WallObject("cable", "cable", 0.02, points_m=np.array([[x, 0.0], [x, 0.8]]), live=False)]
+    wall = Wall(0.6, 0.8, "drywall", kind, objects)
+    passes = [(1, np.array([x, 0.02]), np.array([x, 0.78]))]  # along the stud (or the cable)
+    for y in ys:
+        for dy in (-0.02, 0.0, 0.02):  # across each find, at it and at its flanks
+            passes.append((0, np.array([x - 0.08, y + dy]), np.array([x + 0.08, y + dy])))
+    samples, xy = _passes(wall, passes, seed=3)
+    lines = lines_from_passes(samples, xy, SensorConfig().hysteresis_m, InductiveModel(), FusionParams())
+    if kind == "nail":
+        assert lines == []
+    else:
+        (cable,) = lines
+        assert distances_to_polyline(cable.points_m, np.array([[x, 0.0], [x, 0.8]])).max() < 0.003
