@@ -171,7 +171,7 @@ ALONG_LATERAL_M = 0.006  # samples of a pass this close to a run's centre line m
 # gives 86 % of its level: the inductive footprint σ across is 11 mm)
 ALONG_BIN_M = 0.01  # ... in bins this long
 ALONG_MIN_COVER = 0.5  # a run is judged along its length where passes along it cover this share of its bins
-ALONG_MAX_LOW = 0.5  # ... and is no line where more than this share of them falls below half its peaks' height
+ALONG_MAX_LOW = 0.5  # ... and is no line where more than this share of them falls below half its weakest crossing
 
 
 SHORT_RUN_M = 0.10  # runs shorter than this may be one point crossed by a few passes at its flanks
@@ -215,10 +215,7 @@ def _refuted_along(poly: NDArray[np.float64], height: float, baseline: float, xy
     if covered.sum() < ALONG_MIN_COVER * n_bins:
         return False
     low = top - baseline < 0.5 * height
-    # a line keeps its level over its whole run, out to its last crossings (a single nail seen by a few passes
-    # makes a run a few cm long that falls off at both ends)
-    ends_low = covered[0] and covered[-1] and bool(low[0] or low[-1])
-    return bool(low[covered].mean() > ALONG_MAX_LOW or ends_low)
+    return bool(low[covered].mean() > ALONG_MAX_LOW)
 
 
 def lines_from_passes(samples: dict[str, NDArray], xy: NDArray[np.float64], lag_m: float,
@@ -250,7 +247,8 @@ def _build(peaks: PassPeaks, channel: str, model: InductiveModel, params: Fusion
     runs = [r for r in runs if not _a_point_seen_by_its_flanks(r[0], peaks.height[r[1]] + peaks.baseline,
                                                                peaks.baseline, channel)]
     if along is not None:
-        runs = [r for r in runs if not _refuted_along(r[0], float(np.median(peaks.height[r[1]])), peaks.baseline,
+        # against the run's weakest crossing: a cable running into a box keeps its own level, lower than the box's
+        runs = [r for r in runs if not _refuted_along(r[0], float(np.min(peaks.height[r[1]])), peaks.baseline,
                                                       *along)]
     if not runs:
         return []
