@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import InputError
 from mapping import tolerances as tol
-from mapping.grid import GridInfo, WallGrid
+from mapping.grid import GridInfo, WallGrid, additive_units
 from mapping.mapfile import MappedObject
 from mapping.objects import MapObject
 
@@ -193,17 +193,10 @@ def _distance_field(obj: MapObject, xs: NDArray[np.float64], ys: NDArray[np.floa
     return d.reshape(len(ys), len(xs))
 
 
-def _as_raw(sensor: str, values: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Readings in units where objects add up: the display's 1 − exp(−raw) undone (capacitive is linear)."""
-    if sensor == "capacitive":
-        return values
-    return -np.log1p(-np.clip(values, 0.0, 0.999))
-
-
 def sample_noise(readings: NDArray[np.float64], pass_id: NDArray[np.int64], sensor: str) -> float:
     """Per-sample noise σ of a channel (raw units) from consecutive readings of the same pass: neighbours
     1 mm apart differ by noise alone except on an object's flanks, which the median ignores."""
-    v = _as_raw(sensor, np.asarray(readings, dtype=np.float64))
+    v = additive_units(sensor, np.asarray(readings, dtype=np.float64))
     same = (np.diff(pass_id) == 0) & np.isfinite(v[1:]) & np.isfinite(v[:-1])
     d = np.diff(v)[same]
     if d.size < 10:
@@ -287,7 +280,7 @@ def unexplained_cells(grid: WallGrid, sensor: str, objects: list[MapObject], cov
     known = np.isfinite(signal) & covered
     if known.sum() < 10:
         return out
-    y = _as_raw(sensor, signal)
+    y = additive_units(sensor, signal)
     xs, ys = grid.info.cell_centres()
     blocks: list[_Block] = []
     splat = tol.SIGNAL_SPLAT_SIGMA_M  # the grid's own Gaussian splat widens every footprint

@@ -303,15 +303,19 @@ class AdaptivePlanner:
     def _find(self, samples: Samples, axis: str) -> list[tuple[float, float, float]]:
         """Peaks along a pass in drive coordinates: [(position along axis, height, width)], corrected for the
         inductive hysteresis (the sensor lags by hysteresis_m along the motion)."""
+        return [(pos, height, width) for pos, height, width, _ in self._peaks(samples, axis)]
+
+    def _peaks(self, samples: Samples, axis: str) -> list[tuple[float, float, float, str]]:
+        """[(position, height, width, channel)] of the strongest channel per object along a pass."""
         coord = samples["drive_u_m"] if axis == "x" else samples["drive_v_m"]
         direction = float(np.median(samples["direction"])) if len(coord) else 1.0
         found = []
         for channel in ("inductive", "ac"):
             lag = self.sensor_hysteresis_m * direction if channel == "inductive" else 0.0
             for peak in detect_peaks(coord, samples[channel], self.peaks):
-                found.append((peak.position - lag, peak.height, peak.width))
+                found.append((peak.position - lag, peak.height, peak.width, channel))
         found.sort()
-        merged: list[tuple[float, float, float]] = []
+        merged: list[tuple[float, float, float, str]] = []
         for item in found:  # the same object in both channels: keep one
             if merged and abs(item[0] - merged[-1][0]) < self.peaks.merge_distance_m:
                 if item[1] > merged[-1][1]:
@@ -327,22 +331,7 @@ class AdaptivePlanner:
 
     def _find_channels(self, samples: Samples, axis: str) -> list[tuple[float, float, str]]:
         """Like _find, but [(position, height, channel)] of the strongest channel per object."""
-        coord = samples["drive_u_m"] if axis == "x" else samples["drive_v_m"]
-        direction = float(np.median(samples["direction"])) if len(coord) else 1.0
-        found = []
-        for channel in ("inductive", "ac"):
-            lag = self.sensor_hysteresis_m * direction if channel == "inductive" else 0.0
-            for peak in detect_peaks(coord, samples[channel], self.peaks):
-                found.append((peak.position - lag, peak.height, channel))
-        found.sort()
-        merged: list[tuple[float, float, str]] = []
-        for item in found:
-            if merged and abs(item[0] - merged[-1][0]) < self.peaks.merge_distance_m:
-                if item[1] > merged[-1][1]:
-                    merged[-1] = item
-                continue
-            merged.append(item)
-        return merged
+        return [(pos, height, channel) for pos, height, _, channel in self._peaks(samples, axis)]
 
     def _cross(self, frame: FrameTarget, q: np.ndarray, d: np.ndarray, half: float) -> PassSpec | None:
         """A short pass across a course of direction d at q: along u for steep courses, along v for flat ones."""
