@@ -59,6 +59,7 @@ def pass_peaks(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: st
     # and would shrink both the height and the width
     global_base = float(np.percentile(finite, 20)) if finite.size else 0.0
     base_levels = []
+    passes: list[tuple] = []  # (axis, across, along, xy, values, pass id, frame id) of each crossing pass
     for a, b in zip(starts, ends, strict=True):
         idx = order[a:b]
         p = xy[idx]
@@ -75,23 +76,72 @@ def pass_peaks(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: st
         base_levels.append(float(np.percentile(v, 20)))
         srt = np.argsort(along)
         along, p, v = along[srt], p[srt], v[srt]
-        for pk in detect_peaks(along, v, cfg):
-            height, width = _height_width(along, v, pk.position, global_base, channel)
-            if not np.isfinite(width):
-                continue  # the half-maximum lies beyond the pass's end: the centre is not trustworthy
-            other = float(np.interp(pk.position, along, p[:, 1 - axis]))
-            point = np.empty(2)
-            point[axis] = pk.position
-            point[1 - axis] = other
-            out["xy"].append(point)
-            out["height"].append(height)
-            out["width"].append(width)
-            out["axis"].append(axis)
-            out["pass_id"].append(int(samples["pass_id"][idx[0]]))
+        pid = int(samples["pass_id"][idx[0]])
+        fid = int(samples["frame_id"][idx[0]]) if "frame_id" in samples else 0
+        passes.append((axis, float(np.median(p[:, 1 - axis])), along, p, v, pid, fid))
+        _add_peaks(out, along, p, v, axis, pid, detect_peaks(along, v, cfg), global_base, channel)
+    # Where two frames' passes meet end to end at a seam, an object in the narrow overlap is cut by both passes'
+    # ends; the two passes joined show it whole.
+    for i, j in _seam_pairs(passes):
+        ai, _, al_i, p_i, v_i, pid_i, _ = passes[i]
+        al_j, p_j, v_j, pid_j = passes[j][2], passes[j][3], passes[j][4], passes[j][5]
+        lo, hi = max(al_i[0], al_j[0]), min(al_i[-1], al_j[-1])
+        keep_i = (al_i >= lo - SEAM_WINDOW_M) & (al_i <= hi + SEAM_WINDOW_M)
+        keep_j = (al_j >= lo - SEAM_WINDOW_M) & (al_j <= hi + SEAM_WINDOW_M) & ((al_j < al_i[0]) | (al_j > al_i[-1]))
+        along = np.concatenate([al_i[keep_i], al_j[keep_j]])
+        srt = np.argsort(along)
+        along = along[srt]
+        pj = np.vstack([p_i[keep_i], p_j[keep_j]])[srt]
+        vj = np.concatenate([v_i[keep_i], v_j[keep_j]])[srt]
+        have = [q[ai] for q, a, pp in zip(out["xy"], out["axis"], out["pass_id"], strict=True)
+                if a == ai and pp in (pid_i, pid_j)]
+        found = [pk for pk in detect_peaks(along, vj, cfg) if lo - SEAM_REACH_M <= pk.position <= hi + SEAM_REACH_M
+                 and all(abs(pk.position - h) > cfg.min_distance_m for h in have)]
+        _add_peaks(out, along, pj, vj, ai, pid_i, found, global_base, channel)
     base = global_base
     return PassPeaks(np.array(out["xy"]).reshape(-1, 2), np.array(out["height"], dtype=np.float64),
                      np.array(out["width"], dtype=np.float64), np.array(out["axis"], dtype=np.int64),
                      np.array(out["pass_id"], dtype=np.int64), base)
+
+
+SEAM_ACROSS_M = 0.012  # passes of two frames this close across (frames land a few mm apart), meeting end to end,
+# are one row: the footprint (σ 11-16 mm) sees the same crossing from either
+SEAM_WINDOW_M = 0.06  # ... joined this far either side of their overlap (a footprint's full width)
+SEAM_REACH_M = 0.03  # ... for peaks this close to the overlap
+
+
+def _seam_pairs(passes: list[tuple]) -> list[tuple[int, int]]:
+    """Index pairs of crossing passes of different frames along the same row that meet end to end (overlapping,
+    or a gap under 1 cm, neither inside the other)."""
+    order = sorted(range(len(passes)), key=lambda k: (passes[k][0], passes[k][1]))
+    pairs = []
+    for n, i in enumerate(order):
+        ai, oi, al_i, fi = passes[i][0], passes[i][1], passes[i][2], passes[i][6]
+        for j in order[n + 1:]:
+            aj, oj, al_j, fj = passes[j][0], passes[j][1], passes[j][2], passes[j][6]
+            if aj != ai or oj - oi > SEAM_ACROSS_M:
+                break
+            meet = min(al_i[-1], al_j[-1]) - max(al_i[0], al_j[0]) > -0.01
+            nested = (al_i[0] <= al_j[0] and al_j[-1] <= al_i[-1]) or (al_j[0] <= al_i[0] and al_i[-1] <= al_j[-1])
+            if fj != fi and meet and not nested:
+                pairs.append((i, j))
+    return pairs
+
+
+def _add_peaks(out: dict[str, list], along: NDArray[np.float64], p: NDArray[np.float64], v: NDArray[np.float64],
+               axis: int, pass_id: int, peaks: list, base: float, channel: str) -> None:
+    for pk in peaks:
+        height, width = _height_width(along, v, pk.position, base, channel)
+        if not np.isfinite(width):
+            continue  # the half-maximum lies beyond the pass's end: the centre is not trustworthy
+        point = np.empty(2)
+        point[axis] = pk.position
+        point[1 - axis] = float(np.interp(pk.position, along, p[:, 1 - axis]))
+        out["xy"].append(point)
+        out["height"].append(height)
+        out["width"].append(width)
+        out["axis"].append(axis)
+        out["pass_id"].append(pass_id)
 
 
 def _height_width(along: NDArray[np.float64], v: NDArray[np.float64], position: float,

@@ -370,18 +370,20 @@ def test_sparse_depth_and_strength_of_the_vertical_copper_pipe(plate):
 
 
 def _passes(wall: Wall, lines: list[tuple[int, NDArray[np.float64], NDArray[np.float64]]],
-            seed: int) -> tuple[dict[str, NDArray], NDArray[np.float64]]:
-    """Passes (axis, start, end) over `wall` at 1 mm steps, forward-model readings with the sensor's noise."""
+            seed: int, frames: list[int] | None = None) -> tuple[dict[str, NDArray], NDArray[np.float64]]:
+    """Passes (axis, start, end) over `wall` at 1 mm steps, forward-model readings with the sensor's noise;
+    frames: each pass's frame id (default 0)."""
     model = ForwardModel(wall)
     rng = np.random.default_rng(seed)
-    cols: dict[str, list[NDArray]] = {k: [] for k in ("pass_id", "axis", "direction", "inductive")}
+    cols: dict[str, list[NDArray]] = {k: [] for k in ("pass_id", "axis", "direction", "inductive", "frame_id")}
     positions = []
     for k, (axis, a, b) in enumerate(lines):
         n = int(np.linalg.norm(b - a) / 0.001) + 1
         xy = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
         u = (b - a) / np.linalg.norm(b - a)
         reading = model.display(xy, np.tile(u, (n, 1)), rng=rng)[:, 0]
-        for key, value in (("pass_id", k), ("axis", axis), ("direction", 1 if u[axis] > 0 else -1)):
+        for key, value in (("pass_id", k), ("axis", axis), ("direction", 1 if u[axis] > 0 else -1),
+                           ("frame_id", frames[k] if frames else 0)):
             cols[key].append(np.full(n, value, dtype=np.int64))
         cols["inductive"].append(reading)
         positions.append(xy)
@@ -409,3 +411,22 @@ def test_nails_in_a_row_are_no_line_but_a_cable_crossed_the_same_way_is(kind):
     else:
         (cable,) = lines
         assert distances_to_polyline(cable.points_m, np.array([[x, 0.0], [x, 0.8]])).max() < 0.003
+
+
+def test_a_pipe_in_the_overlap_of_two_frames_is_crossed_by_their_passes_joined():
+    # two frames' rows meet at a seam with 2 cm of overlap, 4 mm apart across (where the robot landed); the
+    # pipe in the overlap is cut off by both passes' ends, and only the rows joined show its peak whole
+    x = 0.395
+    wall = Wall(0.8, 0.8, "brick", "seam", [WallObject("pipe", "pipe", 0.026, points_m=np.array([[x, 0.0], [x, 0.8]]),
+                                                       material="copper", diameter_m=0.015)])
+    lines, frames = [], []
+    for y in (0.1, 0.35, 0.6):
+        lines += [(0, np.array([0.0, y]), np.array([0.40, y])),
+                  (0, np.array([0.38, y + 0.004]), np.array([0.78, y + 0.004]))]
+        frames += [0, 1]
+    samples, xy = _passes(wall, lines, seed=4, frames=frames)
+    peaks = pass_peaks(samples, xy, "inductive", SensorConfig().hysteresis_m)
+    on_pipe = np.abs(peaks.xy[:, 0] - x) < 0.003
+    assert on_pipe.sum() == 3  # one per row, none lost at the seam, none twice
+    (line,) = lines_from_passes(samples, xy, SensorConfig().hysteresis_m, InductiveModel(), FusionParams())
+    assert distances_to_polyline(line.points_m, np.array([[x, 0.0], [x, 0.8]])).max() < 0.003
