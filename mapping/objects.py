@@ -600,12 +600,12 @@ def points_on_lines(points: list[MapObject], lines: list[MapObject],
     """(fasteners, boxes) of the point peaks given the lines: a peak where two lines meet or cross, or at a
     line's end, is what the lines meet at (a box, a junction, the crossing itself: metal, not a fastener);
     the others — alone or on one line's run — are fasteners."""
+    polylines = [ln for ln in lines if ln.points_m.shape[0] >= 2]
     fasteners, boxes = [], []
     for p in points:
         q = p.points_m[0]
-        near = [ln for ln in lines if ln.points_m.shape[0] >= 2
-                and _distance_to_polyline(q, ln.points_m) <= max(clearance_m, ln.width_m)]
-        at_end = any(_beyond_end(q, ln.points_m) for ln in lines if ln.points_m.shape[0] >= 2)
+        near = [ln for ln in polylines if _distance_to_polyline(q, ln.points_m) <= max(clearance_m, ln.width_m)]
+        at_end = any(_beyond_end(q, ln.points_m) for ln in polylines)
         (boxes if len(near) >= 2 or at_end else fasteners).append(p)
     return fasteners, boxes
 

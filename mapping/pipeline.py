@@ -420,16 +420,21 @@ def _metal_named(obj: MapObject) -> MapObject:
     if obj.cls in METAL_CLASSES:
         return obj
     cls = "fastener" if obj.kind == "point" else "metal"
-    obj.cls, obj.confidence = cls, float(sum(obj.features.get(f"p_{c}", 0.0) for c in METAL_CLASSES))
+    obj.cls, obj.confidence = cls, _metal_probability(obj)
     obj.features[NAMED_BY_CHANNEL] = 1.0
     return obj
+
+
+def _metal_probability(obj: MapObject) -> float:
+    """What fusion gave the metal classes together: how sure the inductive channel is of metal here."""
+    return float(sum(obj.features.get(f"p_{c}", 0.0) for c in METAL_CLASSES))
 
 
 def _box(fuser: Fuser, obj: MapObject) -> MapObject:
     """A point peak where lines end or meet: metal (a socket or junction box, the crossing's own peak), never
     a fastener — its class says only that the inductive channel sees metal there."""
     fuser.classify(obj)
-    obj.cls, obj.confidence = "metal", float(sum(obj.features.get(f"p_{c}", 0.0) for c in METAL_CLASSES)) or 1.0
+    obj.cls, obj.confidence = "metal", _metal_probability(obj) or 1.0
     obj.features[NAMED_BY_CHANNEL] = 1.0
     obj.features["at_line_end"] = 1.0
     return obj

@@ -58,8 +58,7 @@ def pass_peaks(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: st
     # one background for the whole scan: a short trace pass's own 20th percentile sits on the peak's tails
     # and would shrink both the height and the width
     global_base = float(np.percentile(finite, 20)) if finite.size else 0.0
-    base_levels = []
-    passes: list[tuple] = []  # (axis, across, along, xy, values, pass id, frame id) of each crossing pass
+    rows: list[_Row] = []  # every crossing pass, sorted along
     for a, b in zip(starts, ends, strict=True):
         idx = order[a:b]
         p = xy[idx]
@@ -73,35 +72,31 @@ def pass_peaks(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: st
             continue  # a following pass runs along a line: its peaks are not crossings
         direction = float(samples["direction"][idx[0]])
         along = p[:, axis] - direction * lag_m
-        base_levels.append(float(np.percentile(v, 20)))
         srt = np.argsort(along)
-        along, p, v = along[srt], p[srt], v[srt]
-        pid = int(samples["pass_id"][idx[0]])
-        fid = int(samples["frame_id"][idx[0]]) if "frame_id" in samples else 0
-        passes.append((axis, float(np.median(p[:, 1 - axis])), along, p, v, pid, fid))
-        _add_peaks(out, along, p, v, axis, pid, detect_peaks(along, v, cfg), global_base, channel)
+        row = _Row(axis, float(np.median(p[srt, 1 - axis])), along[srt], p[srt], v[srt],
+                   int(samples["pass_id"][idx[0]]), int(samples["frame_id"][idx[0]]) if "frame_id" in samples else 0)
+        rows.append(row)
+        _add_peaks(out, row, detect_peaks(row.along, row.values, cfg), global_base, channel)
     # Where two frames' passes meet end to end at a seam, an object in the narrow overlap is cut by both passes'
     # ends; the two passes joined show it whole.
-    for i, j in _seam_pairs(passes):
-        ai, _, al_i, p_i, v_i, pid_i, _ = passes[i]
-        al_j, p_j, v_j, pid_j = passes[j][2], passes[j][3], passes[j][4], passes[j][5]
-        lo, hi = max(al_i[0], al_j[0]), min(al_i[-1], al_j[-1])
-        keep_i = (al_i >= lo - SEAM_WINDOW_M) & (al_i <= hi + SEAM_WINDOW_M)
-        keep_j = (al_j >= lo - SEAM_WINDOW_M) & (al_j <= hi + SEAM_WINDOW_M) & ((al_j < al_i[0]) | (al_j > al_i[-1]))
-        along = np.concatenate([al_i[keep_i], al_j[keep_j]])
+    for ri, rj in _seam_pairs(rows):
+        lo, hi = max(ri.along[0], rj.along[0]), min(ri.along[-1], rj.along[-1])
+        keep_i = (ri.along >= lo - SEAM_WINDOW_M) & (ri.along <= hi + SEAM_WINDOW_M)
+        keep_j = ((rj.along >= lo - SEAM_WINDOW_M) & (rj.along <= hi + SEAM_WINDOW_M)
+                  & ((rj.along < ri.along[0]) | (rj.along > ri.along[-1])))
+        along = np.concatenate([ri.along[keep_i], rj.along[keep_j]])
         srt = np.argsort(along)
-        along = along[srt]
-        pj = np.vstack([p_i[keep_i], p_j[keep_j]])[srt]
-        vj = np.concatenate([v_i[keep_i], v_j[keep_j]])[srt]
-        have = [q[ai] for q, a, pp in zip(out["xy"], out["axis"], out["pass_id"], strict=True)
-                if a == ai and pp in (pid_i, pid_j)]
-        found = [pk for pk in detect_peaks(along, vj, cfg) if lo - SEAM_REACH_M <= pk.position <= hi + SEAM_REACH_M
+        joined = _Row(ri.axis, ri.across, along[srt], np.vstack([ri.xy[keep_i], rj.xy[keep_j]])[srt],
+                      np.concatenate([ri.values[keep_i], rj.values[keep_j]])[srt], ri.pass_id, ri.frame_id)
+        have = [q[ri.axis] for q, a, pp in zip(out["xy"], out["axis"], out["pass_id"], strict=True)
+                if a == ri.axis and pp in (ri.pass_id, rj.pass_id)]
+        found = [pk for pk in detect_peaks(joined.along, joined.values, cfg)
+                 if lo - SEAM_REACH_M <= pk.position <= hi + SEAM_REACH_M
                  and all(abs(pk.position - h) > cfg.min_distance_m for h in have)]
-        _add_peaks(out, along, pj, vj, ai, pid_i, found, global_base, channel)
-    base = global_base
+        _add_peaks(out, joined, found, global_base, channel)
     return PassPeaks(np.array(out["xy"]).reshape(-1, 2), np.array(out["height"], dtype=np.float64),
                      np.array(out["width"], dtype=np.float64), np.array(out["axis"], dtype=np.int64),
-                     np.array(out["pass_id"], dtype=np.int64), base)
+                     np.array(out["pass_id"], dtype=np.int64), global_base)
 
 
 SEAM_ACROSS_M = 0.012  # passes of two frames this close across (frames land a few mm apart), meeting end to end,
@@ -110,38 +105,50 @@ SEAM_WINDOW_M = 0.06  # ... joined this far either side of their overlap (a foot
 SEAM_REACH_M = 0.03  # ... for peaks this close to the overlap
 
 
-def _seam_pairs(passes: list[tuple]) -> list[tuple[int, int]]:
-    """Index pairs of crossing passes of different frames along the same row that meet end to end (overlapping,
-    or a gap under 1 cm, neither inside the other)."""
-    order = sorted(range(len(passes)), key=lambda k: (passes[k][0], passes[k][1]))
+@dataclass
+class _Row:
+    """One crossing pass: its axis (0: along x, 1: along y), where it runs across, and its samples sorted along
+    (lag undone)."""
+
+    axis: int
+    across: float
+    along: NDArray[np.float64]
+    xy: NDArray[np.float64]
+    values: NDArray[np.float64]
+    pass_id: int
+    frame_id: int
+
+
+def _seam_pairs(rows: list[_Row]) -> list[tuple[_Row, _Row]]:
+    """Pairs of crossing passes of different frames along the same row that meet end to end (overlapping, or a
+    gap under 1 cm, neither inside the other)."""
+    ordered = sorted(rows, key=lambda r: (r.axis, r.across))
     pairs = []
-    for n, i in enumerate(order):
-        ai, oi, al_i, fi = passes[i][0], passes[i][1], passes[i][2], passes[i][6]
-        for j in order[n + 1:]:
-            aj, oj, al_j, fj = passes[j][0], passes[j][1], passes[j][2], passes[j][6]
-            if aj != ai or oj - oi > SEAM_ACROSS_M:
+    for n, ri in enumerate(ordered):
+        for rj in ordered[n + 1:]:
+            if rj.axis != ri.axis or rj.across - ri.across > SEAM_ACROSS_M:
                 break
-            meet = min(al_i[-1], al_j[-1]) - max(al_i[0], al_j[0]) > -0.01
-            nested = (al_i[0] <= al_j[0] and al_j[-1] <= al_i[-1]) or (al_j[0] <= al_i[0] and al_i[-1] <= al_j[-1])
-            if fj != fi and meet and not nested:
-                pairs.append((i, j))
+            a, b = ri.along, rj.along
+            meet = min(a[-1], b[-1]) - max(a[0], b[0]) > -0.01
+            nested = (a[0] <= b[0] and b[-1] <= a[-1]) or (b[0] <= a[0] and a[-1] <= b[-1])
+            if rj.frame_id != ri.frame_id and meet and not nested:
+                pairs.append((ri, rj))
     return pairs
 
 
-def _add_peaks(out: dict[str, list], along: NDArray[np.float64], p: NDArray[np.float64], v: NDArray[np.float64],
-               axis: int, pass_id: int, peaks: list, base: float, channel: str) -> None:
+def _add_peaks(out: dict[str, list], row: _Row, peaks: list, base: float, channel: str) -> None:
     for pk in peaks:
-        height, width = _height_width(along, v, pk.position, base, channel)
+        height, width = _height_width(row.along, row.values, pk.position, base, channel)
         if not np.isfinite(width):
             continue  # the half-maximum lies beyond the pass's end: the centre is not trustworthy
         point = np.empty(2)
-        point[axis] = pk.position
-        point[1 - axis] = float(np.interp(pk.position, along, p[:, 1 - axis]))
+        point[row.axis] = pk.position
+        point[1 - row.axis] = float(np.interp(pk.position, row.along, row.xy[:, 1 - row.axis]))
         out["xy"].append(point)
         out["height"].append(height)
         out["width"].append(width)
-        out["axis"].append(axis)
-        out["pass_id"].append(pass_id)
+        out["axis"].append(row.axis)
+        out["pass_id"].append(row.pass_id)
 
 
 def _height_width(along: NDArray[np.float64], v: NDArray[np.float64], position: float,
@@ -159,6 +166,14 @@ def _height_width(along: NDArray[np.float64], v: NDArray[np.float64], position: 
     if crossings is None:
         return height, float("nan")
     return height, crossings[1] - crossings[0]
+
+
+def _crosses(axis: NDArray, u: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Whether passes along `axis` (0: x, 1: y) cross a line of unit direction u (2,) or directions (h, 2) at
+    MIN_CROSSING_SIN or more; (n,) or (h, n). Only a crossing pass's peak is a crossing of the line: a pass along
+    a stud sees its nails one after another, peaks in a row that are no line."""
+    across = np.where(axis == 0, u[..., 1, None], u[..., 0, None])
+    return np.abs(across) >= MIN_CROSSING_SIN
 
 
 def _fit(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -185,10 +200,7 @@ def ransac_lines(peaks: PassPeaks, seed: int = 0) -> list[tuple[NDArray[np.float
         n = np.column_stack([-d[:, 1], d[:, 0]]) / length[:, None]
         dist = np.abs(np.einsum("hj,hnj->hn", n, p[None, :, :] - p[a][:, None, :]))  # (hypotheses, points)
         axis = peaks.axis[remaining]
-        # a peak is a crossing of the line only if its pass crosses it: a pass along a stud sees the stud's nails
-        # one after another, peaks in a row that are no line
-        u_h = d / length[:, None]
-        crossing = np.abs(np.where(axis[None, :] == 0, u_h[:, 1:2], u_h[:, 0:1])) >= MIN_CROSSING_SIN
+        crossing = _crosses(axis, d / length[:, None])  # (hypotheses, points)
         counts = ((dist < RANSAC_INLIER_M) & crossing).sum(axis=1)
         best = int(np.argmax(counts))
         if counts[best] < MIN_PEAKS_PER_LINE:
@@ -197,8 +209,7 @@ def ransac_lines(peaks: PassPeaks, seed: int = 0) -> list[tuple[NDArray[np.float
         for _ in range(2):  # least squares on the inliers, then re-collect them
             c, u = _fit(p[inl])
             nrm = np.array([-u[1], u[0]])
-            crosses = np.abs(np.where(axis == 0, u[1], u[0])) >= MIN_CROSSING_SIN
-            inl = (np.abs((p - c) @ nrm) < RANSAC_INLIER_M) & crosses
+            inl = (np.abs((p - c) @ nrm) < RANSAC_INLIER_M) & _crosses(axis, u)
             if inl.sum() < 2:
                 break
         idx = remaining[inl]
@@ -249,8 +260,7 @@ def _refuted_along(poly: NDArray[np.float64], height: float, baseline: float, xy
     if length < 2 * ALONG_BIN_M:
         return False
     u = u / length
-    parallel = np.where(axis == 0, abs(u[1]) < MIN_CROSSING_SIN, np.where(axis == 1, abs(u[0]) < MIN_CROSSING_SIN,
-                                                                          True))
+    parallel = (axis > 1) | ~_crosses(axis, u)  # following passes (axis 2) run along their line
     rel = xy - poly[0]
     t = rel @ u
     off = np.abs(rel[:, 0] * u[1] - rel[:, 1] * u[0])
