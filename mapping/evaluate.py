@@ -7,6 +7,8 @@ the fraction of detected line length within `match_m` of any pipe or cable (plas
 they are real). Position error: distance of detected line points to the truth centre line (points matched
 within `match_m`). Angle error: per detected straight piece, against the nearest truth segment. Class: the
 length-weighted majority class of detections along the target, against power_line (cables) or metal_pipe.
+evaluate_measured() counts recall by the same rule against only the measured stretches of mapped lines
+(mapping.mapfile.MappedObject: a stretch joined across unmeasured ground is inferred, not found).
 """
 
 from __future__ import annotations
@@ -100,8 +102,8 @@ def evaluate(objects: list[MapObject], wall: Wall, match_m: float = MATCH_M,
              min_coverage: float = MIN_COVERAGE, max_depth_m: float = MAX_DEPTH_M,
              region: tuple[float, float, float, float] | None = None) -> Evaluation:
     """Compare detected line objects with the wall's pipes and cables (region: x0, y0, x1, y1 scanned)."""
-    ev = Evaluation()
     lines = [o for o in objects if o.kind == "line"]
+    ev = _match_targets([(o.points_m, o.cls) for o in lines], wall, match_m, min_coverage, max_depth_m, region)
     real = [o for o in wall.objects if o.kind in ("pipe", "cable")]
     for o in lines:
         pts = densify(o.points_m, 0.002)
@@ -127,6 +129,14 @@ def evaluate(objects: list[MapObject], wall: Wall, match_m: float = MATCH_M,
                         best = (dd, rb - ra)
             if best is not None:
                 ev.angle_errors_deg.append(_segments_angle(b - a, best[1]))
+    return ev
+
+
+def _match_targets(lines: list[tuple[NDArray[np.float64], str]], wall: Wall, match_m: float, min_coverage: float,
+                   max_depth_m: float, region: tuple[float, float, float, float] | None) -> Evaluation:
+    """The targets (is_target) that lines ((k, 2) polyline, class each) find: n_targets, n_found, class_pairs,
+    missed. The one matching rule of evaluate() and evaluate_measured()."""
+    ev = Evaluation()
     for t in wall.objects:
         if not is_target(t, max_depth_m):
             continue
@@ -140,18 +150,28 @@ def evaluate(objects: list[MapObject], wall: Wall, match_m: float = MATCH_M,
         if not lines:
             ev.missed.append(t.id)
             continue
-        dists = np.stack([distance_to_polyline(probe, o.points_m) for o in lines])
+        dists = np.stack([distance_to_polyline(probe, points) for points, _ in lines])
         covered = dists.min(axis=0) < match_m
         if covered.mean() >= min_coverage:
             ev.n_found += 1
             votes: dict[str, float] = {}
             owner = dists.argmin(axis=0)
             for k in owner[covered]:
-                votes[lines[k].cls] = votes.get(lines[k].cls, 0.0) + 1.0
+                votes[lines[k][1]] = votes.get(lines[k][1], 0.0) + 1.0
             ev.class_pairs.append((truth_class(t), max(votes, key=votes.get)))  # type: ignore[arg-type]
         else:
             ev.missed.append(t.id)
     return ev
+
+
+def evaluate_measured(objects: list[MappedObject], wall: Wall, match_m: float = MATCH_M,
+                      min_coverage: float = MIN_COVERAGE, max_depth_m: float = MAX_DEPTH_M,
+                      region: tuple[float, float, float, float] | None = None) -> Evaluation:
+    """Recall as evaluate() counts it, but against the measured stretches of the mapped lines only
+    (MappedObject.parts(measured=True)): a target the map draws by joining across unmeasured ground is not
+    found there. Fills the target fields (n_targets, n_found, class_pairs, missed), not precision or errors."""
+    parts = [(part, o.cls) for o in objects if o.shape == "line" for part in o.parts(measured=True)]
+    return _match_targets(parts, wall, match_m, min_coverage, max_depth_m, region)
 
 
 FALSE_SAFE_STEP_M = 0.005  # the true centre lines are probed every 5 mm
@@ -264,6 +284,43 @@ def area_recall(objects: list[MapObject], wall: Wall) -> tuple[int, int, list[st
         if not hit:
             missed.append(obj.id)
     return found, total, missed
+
+
+def pipes_labelled_wood(objects: list[MapObject], wall: Wall, match_m: float = MATCH_M,
+                        max_depth_m: float = MAX_DEPTH_M) -> list[str]:
+    """Ids of the true pipes and cables within reach (is_hazard) that the map labels wood: more than half of
+    the stretch of the centre line that mapped lines (within match_m) and outlines (inside) cover lies only
+    under objects that read as wood. That is a non-metal outline (a stud's shape; files' former "wood"
+    objects read so) or, along a metal pipe or a cable, any non-metal object (the inductive channel sees
+    metal there: non-metal would say wood or water). A water-filled plastic pipe mapped as a non-metal line is
+    what its channel can tell, not wood."""
+    from scanner.sensor_model import points_in_polygon
+
+    out = []
+    for t in wall.objects:
+        if not is_hazard(t, max_depth_m):
+            continue
+        probe = densify(t.points_m, 0.005)
+        metal = t.kind == "cable" or t.is_metal
+        wood = np.zeros(len(probe), bool)
+        other = np.zeros(len(probe), bool)
+        for o in objects:
+            pts = np.asarray(o.points_m, dtype=np.float64)
+            if o.kind == "outline" and len(pts) >= 3:
+                under = points_in_polygon(probe, pts)
+            elif o.kind == "line":
+                under = distance_to_polyline(probe, pts) < match_m
+            else:
+                continue  # a fastener names a point, not a course
+            if o.cls == "non_metal" and (o.kind == "outline" or metal):
+                wood |= under
+            else:
+                other |= under
+        covered = wood | other
+        # a stud's outline a cable crosses covers a few cm of it: the majority of what covers it decides
+        if covered.any() and (wood & ~other).sum() > 0.5 * covered.sum():
+            out.append(t.id)
+    return out
 
 
 def truth_under(obj: MapObject, wall: Wall, match_m: float = MATCH_M) -> WallObject | None:
