@@ -34,9 +34,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import InputError
 from mapping import tolerances as tol
-from mapping.grid import GridInfo, WallGrid, additive_units
+from mapping.grid import GridInfo, WallGrid
 from mapping.mapfile import MappedObject
 from mapping.objects import MapObject
+from scanner.sensor_model import additive_units
 
 FORMAT = "arproj-coverage/1"
 FILE_NAME = "coverage.npz"

@@ -15,9 +15,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from mapping.grid import GridInfo, SensorModel, WallGrid, additive_units
+from mapping.grid import GridInfo, SensorModel, WallGrid
 from mapping.objects import MapObject, _distance_to_polyline, extract_lines, extract_points
 from mapping.stitching import FrameGraph, apply_pose
+from scanner.sensor_model import additive_units
 
 if TYPE_CHECKING:
     from mapping.pipeline import ScanData

@@ -35,9 +35,9 @@ from numpy.typing import NDArray
 from scipy import ndimage
 from scipy.special import expit
 
-from mapping.grid import GridInfo, WallGrid, additive_units
+from mapping.grid import GridInfo, WallGrid
 from mapping.objects import LINE_SIGMA_M, MapObject, _smooth_derivatives, normalise, ridge_width
-from scanner.sensor_model import points_in_polygon
+from scanner.sensor_model import additive_units, points_in_polygon
 
 CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "non_metal", "cavity", "fastener")
 METAL_CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "fastener")  # what the inductive sensor sees

@@ -277,14 +277,6 @@ class WallGrid:
         return sensor
 
 
-def additive_units(sensor: str, values: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Readings in units where objects add up: the inductive and AC display's soft saturation 1 − exp(−raw)
-    undone (scanner/sensor_model.py; capacitive is linear). A saturated top (display 1) stays flat at 6.9."""
-    if sensor == "capacitive":
-        return values
-    return -np.log1p(-np.clip(values, 0.0, 0.999))
-
-
 def build_grid(xy: ArrayLike, readings: Mapping[str, ArrayLike], info: GridInfo | None = None,
                models: Mapping[str, SensorModel] | None = None,
                sensors: Sequence[str] = SENSORS, resolution: float = tol.DEFAULT_RESOLUTION_M,

@@ -482,7 +482,8 @@ POINT_MIN_REL = 0.3  # a point stands at least this share above what it sits on 
 
 
 def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 0.004,
-                   min_strength: float = 6.0, min_rel: float = POINT_MIN_REL) -> list[MapObject]:
+                   min_strength: float = 6.0, min_rel: float = POINT_MIN_REL,
+                   saturated: float | None = None) -> list[MapObject]:
     """Small peaks (screws, nails) as 'point' MapObjects with sub-cell positions, alone or on top of a line or
     an area (a screw on a pipe, a steel stud's screws): signal in units where objects add up.
 
@@ -492,6 +493,9 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
     ray; a short stretch of line or a wide area does not fall off within the rays at all). The peak is a point
     when it rises min_strength robust σ and min_rel of that level above it. features: "base" (what it sits on,
     σ units), "half_width_m" (median over the rays of the distance where it has fallen half-way to the base).
+    saturated: the signal value of a saturated reading; a peak on a saturated top (a shallow screw on a steel
+    stud saturates over 3 cm) is that top's middle, not whichever of its equal cells the maximum filter keeps:
+    rays from an off-centre cell would end on the top and read it as what the point sits on.
     """
     z, _, _ = normalise(signal)
     known = np.isfinite(signal)
@@ -501,12 +505,26 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
     rows, cols = np.nonzero(peak)
     if rows.size == 0:
         return []
+    origin = np.column_stack([rows, cols]).astype(np.float64)  # where the rays start, (row, col)
+    on_top = np.zeros(rows.size, bool)
+    if saturated is not None:
+        top = np.nan_to_num(signal, nan=-np.inf) >= saturated - 1e-9
+        labels, n = ndimage.label(top)
+        label = labels[rows, cols]
+        if n:
+            middles = np.array(ndimage.center_of_mass(top, labels, np.arange(1, n + 1))).reshape(-1, 2)
+            first = np.zeros(rows.size, bool)
+            first[np.unique(label, return_index=True)[1]] = True
+            keep = (label == 0) | first  # one peak per saturated top
+            on_top = label > 0
+            origin[on_top] = middles[label[on_top] - 1]
+            rows, cols, origin, on_top = rows[keep], cols[keep], origin[keep], on_top[keep]
     angles = np.arange(POINT_RAY_DIRECTIONS) * 2.0 * np.pi / POINT_RAY_DIRECTIONS
     steps = np.arange(0.0, POINT_RAY_M[1] + 1e-9, min(info.resolution, 0.002)) / info.resolution
     far = steps >= POINT_RAY_M[0] / info.resolution
     # (peaks, directions, steps) profiles of the smoothed map along the rays
-    rr = rows[:, None, None] + np.sin(angles)[None, :, None] * steps[None, None, :]
-    cc = cols[:, None, None] + np.cos(angles)[None, :, None] * steps[None, None, :]
+    rr = origin[:, 0, None, None] + np.sin(angles)[None, :, None] * steps[None, None, :]
+    cc = origin[:, 1, None, None] + np.cos(angles)[None, :, None] * steps[None, None, :]
     profile = ndimage.map_coordinates(s, [rr.ravel(), cc.ravel()], order=1, mode="nearest").reshape(rr.shape)
     base = profile[:, :, far].min(axis=2).max(axis=1)
     height = s[rows, cols]
@@ -520,8 +538,10 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
             off = -np.linalg.solve(H, g)
         except np.linalg.LinAlgError:
             continue
-        if not np.all(np.isfinite(off)) or np.any(np.abs(off) > 1.0):
-            off = np.zeros(2)  # a flat (saturated) top: the cell itself
+        if on_top[k]:
+            off = origin[k, ::-1] - [cc_k, rr_k]  # the saturated top's middle
+        elif not np.all(np.isfinite(off)) or np.any(np.abs(off) > 1.0):
+            off = np.zeros(2)  # a flat top: the cell itself
         xy = info.to_wall(np.array([[cc_k + off[0], rr_k + off[1]]]))
         below = profile[k] <= (base[k] + 0.5 * bump[k])
         first = np.where(below.any(axis=1), below.argmax(axis=1), len(steps) - 1)

@@ -21,7 +21,7 @@ from mapping import tolerances as tol
 from mapping.depth import AcModel, estimate_depths
 from mapping.evidence import Coverage, coverage_radii, mapped_objects, sample_noise
 from mapping.fusion import METAL_CLASSES, TWO_SIDED_CHANNELS, UNKNOWN, Fuser, FusionParams, InductiveModel
-from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid, additive_units
+from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid
 from mapping.mapfile import MappedObject
 from mapping.objects import (
     MapObject,
@@ -33,6 +33,7 @@ from mapping.objects import (
 )
 from mapping.stitching import FrameGraph, laser_constraints
 from scanner.log import DamagedLogError, ScanLog
+from scanner.sensor_model import ADDITIVE_SATURATED, additive_units
 
 STITCH_ROUNDS = 2  # feature pairing + alignment rounds (the second re-pairs and re-linearises)
 SPARSE_COVERAGE = 0.6  # below this fraction of the wall's cells observed, lines come from the passes' peaks
@@ -322,7 +323,7 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
     if "inductive" in grid.models:
         # in units where a screw on a pipe adds to the pipe (a saturated display would flatten it away)
         points = extract_points(additive_units("inductive", grid.signal("inductive")), grid.info,
-                                min_strength=settings.point_min_strength)
+                                min_strength=settings.point_min_strength, saturated=ADDITIVE_SATURATED)
         points, boxes = points_on_lines(points, lines)
     non_metal: list[MapObject] = []
     if "capacitive" in grid.models and "inductive" in grid.models and sparse_data is None:

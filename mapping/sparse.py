@@ -18,9 +18,9 @@ from numpy.typing import NDArray
 
 from mapping import tolerances as tol
 from mapping.fusion import FusionParams, InductiveModel, _raw, _sigmoid
-from mapping.grid import additive_units
 from mapping.objects import MapObject, _join, distances_to_polyline
 from scanner.peaks import PeakConfig, detect_peaks, level_crossings
+from scanner.sensor_model import additive_units
 
 RANSAC_INLIER_M = 0.004  # a peak this close to a line belongs to it
 MIN_CROSSING_SIN = float(np.sin(np.radians(20.0)))  # ... if its pass crosses the line at 20° or more

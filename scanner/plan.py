@@ -28,6 +28,7 @@ import numpy as np
 
 from geometry.errors import InputError
 from scanner.peaks import PeakConfig, detect_peaks
+from scanner.sensor_model import additive_units
 from scanner.wall import Wall
 
 REACH_TOLERANCE_M = 1e-6
@@ -235,6 +236,8 @@ class AdaptiveConfig:
     stud_min_width_m: float = 0.04  # ... and its least FWHM: wider than any cable's or pipe's echo
     follow_min_m: float = 0.01  # a stretch shorter than this between two crossings is covered by them
     end_tolerance_m: float = 0.015  # the following pass's response may fall this near a course's end
+    fastener_min_rise: float = 0.5  # additive units: a bump this high on a pass along a stud or a course (a
+    # screw on a steel stud rises ~4 above the stud's 3, a nail on wood ~1) is crossed by a point pass
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -333,11 +336,41 @@ class AdaptivePlanner:
         """Like _find, but [(position, height, channel)] of the strongest channel per object."""
         return [(pos, height, channel) for pos, height, _, channel in self._peaks(samples, axis)]
 
-    def _cross(self, frame: FrameTarget, q: np.ndarray, d: np.ndarray, half: float) -> PassSpec | None:
+    def _cross(self, frame: FrameTarget, q: np.ndarray, d: np.ndarray, half: float,
+               stage: str = "trace") -> PassSpec | None:
         """A short pass across a course of direction d at q: along u for steep courses, along v for flat ones."""
         if abs(d[1]) >= abs(d[0]):
-            return self._short(frame, "trace", "x", float(q[1]), float(q[0]), half)
-        return self._short(frame, "trace", "y", float(q[0]), float(q[1]), half)
+            return self._short(frame, stage, "x", float(q[1]), float(q[0]), half)
+        return self._short(frame, stage, "y", float(q[0]), float(q[1]), half)
+
+    def _fastener_passes(self, frame: FrameTarget, along: list[tuple[PassSpec, Samples]],
+                         coarse: list[PassSpec]) -> list[PassSpec]:
+        """A short pass across every bump of the inductive response along a stud or a traced course (a screw, a
+        nail, a clamp: a point there is mapped only where two passes cross it), unless a coarse pass crosses
+        it already. The bumps are found in additive units: on a steel stud the display is nearly saturated."""
+        cfg = self.config
+        rise = PeakConfig(min_height=cfg.fastener_min_rise, min_prominence=0.6 * cfg.fastener_min_rise,
+                          min_distance_m=0.03)
+        seen: list[np.ndarray] = []
+        passes = []
+        for spec, samples in along:
+            a, b = np.array(spec.start_uv), np.array(spec.end_uv)
+            d = (b - a) / max(float(np.linalg.norm(b - a)), 1e-9)
+            uv = np.column_stack([samples["drive_u_m"], samples["drive_v_m"]])
+            t = (uv - a) @ d
+            for peak in detect_peaks(t, additive_units("inductive", samples["inductive"]), rise):
+                m = a + peak.position * d
+                across = "x" if abs(d[1]) >= abs(d[0]) else "y"  # a coarse pass along the course crosses nothing
+                on_coarse = any(c.axis == across and abs(c.start_uv[1 if across == "x" else 0] - m[1 if across ==
+                                                                                                 "x" else 0]) < 0.01
+                                for c in coarse)
+                if on_coarse or any(float(np.linalg.norm(m - q)) < 0.02 for q in seen):
+                    continue
+                seen.append(m)
+                spec_across = self._cross(frame, m, d, cfg.point_half_m, "point")
+                if spec_across is not None:
+                    passes.append(spec_across)
+        return [self._oriented(p) for p in passes]
 
     def _crossing_points(self, spec: PassSpec, samples: Samples) -> list[tuple[np.ndarray, float, str]]:
         """Where objects cross a pass, in drive coordinates: [(uv, height, channel)]."""
@@ -565,9 +598,11 @@ class AdaptivePlanner:
             tr.stop = tr.stop or "stages"
         # studs: a fastener pass along the centre of every wide capacitive response that no metal explains,
         # found on two coarse rows or more
-        studs = self._studs(frame, coarse, by_spec, owned_lo, owned_hi)
+        along: list[tuple[PassSpec, Samples]] = []  # passes along studs and courses: where fasteners show
+        studs = [self._oriented(p) for p in self._studs(frame, coarse, by_spec, owned_lo, owned_hi)]
         if studs:
-            yield [self._oriented(p) for p in studs]
+            results = yield studs
+            along += zip(studs, [results[i] for i in sorted(results)], strict=True)
         # (4) following: a pass along every traced stretch; where the response falls, cross there and follow again
         for chain in chains:
             course = list(chain.points)
@@ -600,6 +635,7 @@ class AdaptivePlanner:
                                                       _uv(item[1][1]))))
             results = yield follow
             got = [results[i] for i in sorted(results)]
+            along += zip(follow, got, strict=True)
             cross: list[PassSpec] = []
             cross_owner: list[tuple[_Chain, list[Any], np.ndarray, float, float]] = []
             for (chain, seg), samples in zip(todo, got, strict=True):
@@ -647,6 +683,9 @@ class AdaptivePlanner:
                 i = next(k for k, other in enumerate(chain.segments) if other is seg)
                 chain.segments[i:i + 1] = parts
                 chain.heights.append(height)
+        points = self._fastener_passes(frame, along, coarse)
+        if points:
+            yield points
         for k, chain in enumerate(chains):
             length = sum(float(np.linalg.norm(b - a)) for a, b, _ in chain.segments)
             measured = sum(float(np.linalg.norm(b - a)) * (s or 0.0) for a, b, s in chain.segments)

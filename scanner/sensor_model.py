@@ -148,6 +148,19 @@ def points_in_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return inside
 
 
+DISPLAY_CLIP = 0.999  # display values above this are saturated: their raw value is unknown
+ADDITIVE_SATURATED = -math.log1p(-DISPLAY_CLIP)  # 6.9: what additive_units gives a saturated reading
+
+
+def additive_units(sensor: str, values: np.ndarray) -> np.ndarray:
+    """Readings in units where objects add up: the inductive and AC display's soft saturation 1 − exp(−raw)
+    (SensorModel.display) undone; capacitive is linear. A saturated top (display 1) stays flat at
+    ADDITIVE_SATURATED."""
+    if sensor == "capacitive":
+        return values
+    return -np.log1p(-np.clip(values, 0.0, DISPLAY_CLIP))
+
+
 @dataclass
 class _Term:
     """One object's contribution to one sensor channel."""

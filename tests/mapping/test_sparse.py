@@ -18,13 +18,12 @@ from numpy.typing import NDArray
 from mapping import tolerances as tol
 from mapping.evaluate import truth_class
 from mapping.fusion import FusionParams, InductiveModel
-from mapping.grid import additive_units
 from mapping.objects import MapObject, distances_to_polyline
 from mapping.pipeline import ScanData
 from mapping.simscan import simulate_scan
 from mapping.sparse import MAX_GAP_M, RANSAC_INLIER_M, PassPeaks, lines_from_passes, pass_peaks, ransac_lines
 from scanner.peaks import level_crossings
-from scanner.sensor_model import SensorConfig
+from scanner.sensor_model import SensorConfig, additive_units
 from scanner.sensor_model import SensorModel as ForwardModel
 from scanner.wall import Wall, WallObject, densify, load_wall, shipped_walls
 
@@ -212,7 +211,7 @@ def _noise_free_passes(wall: Wall, step_m: float) -> tuple[dict[str, NDArray], N
 
 def _display_fwhm(wall: Wall, x: float) -> tuple[float, float]:
     """(half-maximum width m, height over the far baseline) of the noise-free profile across x: the width in
-    additive units (mapping.grid.additive_units, the footprint's own), the height in display units."""
+    additive units (scanner.sensor_model.additive_units, the footprint's own), the height in display units."""
     offsets = np.arange(-0.1, 0.1, 0.0001)
     profile = ForwardModel(wall).display(np.column_stack([x + offsets, np.full_like(offsets, 0.24)]))[:, 0]
     base = float(ForwardModel(Wall(wall.width_m, wall.height_m, wall.material)).display(np.array([[x, 0.24]]))[0, 0])
