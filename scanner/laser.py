@@ -23,7 +23,7 @@ deterministic from the generator given.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,6 +34,7 @@ LINE_INLIER_M = 0.02  # RANSAC inlier distance for wall lines (several range-noi
 LINE_MAX_TILT_RAD = math.radians(15.0)  # a wall line must run within this of its expected direction
 LINE_MIN_POINTS = 20  # fewer inliers cannot give a trustworthy wall line
 RANSAC_ITERATIONS = 300
+CEILING_CLEARANCE_M = 0.10  # a simulated room's ceiling above the scanned wall's top, at least
 
 # Frame columns the laser adds to the scan log (NaN/NULL when no laser fix is available)
 LASER_KEYS: tuple[str, ...] = ("laser_x_m", "laser_x_sigma_m", "laser_y_m", "laser_y_sigma_m",
@@ -51,7 +52,7 @@ class LaserConfig:
     max_range_m: float = 10.0
     outlier_fraction: float = 0.02
     room_depth_m: float = 4.0
-    room_height_m: float = 2.7  # floor to ceiling
+    room_height_m: float = 2.7  # floor to ceiling (a taller wall's simulated room: room_for_wall)
     floor_margin_m: float = 0.3  # the floor lies this far below the wall frame's y = 0 (site survey)
     side_margin_m: float = 0.3  # the side walls stand this far left of x = 0 and right of x = W (the scanned
     # area lies inside the room); the site survey gives it, the fix reports x in wall coordinates with it
@@ -61,6 +62,12 @@ class LaserConfig:
 
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
+
+    def room_for_wall(self, wall_height_m: float) -> LaserConfig:
+        """This room, its ceiling raised where the scanned wall (from floor_margin_m up) would not fit under
+        it with CEILING_CLEARANCE_M to spare: a simulated room always holds the wall it is scanned on."""
+        needed = self.floor_margin_m + wall_height_m + CEILING_CLEARANCE_M
+        return self if self.room_height_m >= needed else replace(self, room_height_m=needed)
 
 
 def simulate_scan_2d(x_m: float, standoff_m: float, yaw_rad: float, wall_width_m: float, depth_m: float,

@@ -25,7 +25,9 @@ Tables
       seed              integer seed of the simulation (null for real hardware)
       status            "running" or "complete"
   frames(frame_id INTEGER PRIMARY KEY, time_s REAL,           time_s: scan time the robot stood ready
-         cmd_x_m, cmd_y_m, cmd_phi_rad,                       frame pose the planner commanded
+         cmd_x_m, cmd_y_m, cmd_phi_rad,                       frame pose the planner commanded (cmd_y_m:
+                                                              the lift's height of its band, 0 on a wall
+                                                              within the drives' reach and in older logs)
          est_x_m, est_y_m, est_phi_rad, cov_json TEXT,        localization estimate and its 3x3 covariance
                                                               (row-major JSON, order x, y, phi; m², rad²)
          true_x_m, true_y_m, true_phi_rad,                    simulation truth (NULL on real hardware)

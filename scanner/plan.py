@@ -3,11 +3,15 @@
 The robot stands in front of the wall at one position per *frame*; two linear drives move the scanner over
 a window of the wall: u (right) up to `travel_u_m`, v (up) up to `travel_v_m`. A frame's pose (x, y, phi)
 maps drive coordinates to wall coordinates (see scanner/log.py). Frames are `frame_width_m` (≈0.35 m, the
-paper's) apart along the wall.
+paper's) apart along the wall. A wall taller than the drives' reach is scanned in stacked *bands*: a lift on
+the platform raises the drive frame (at most `lift_travel_m`) so that its window reaches the next band, which
+overlaps the one below by `band_overlap_m`; at each robot position the robot scans band after band (upwards
+at one position, downwards at the next: one lift move per band change) and re-aligns after every lift move.
 
 A *pass* is one measuring move at scan speed along u (axis 'x') or v (axis 'y'); between passes the drives
 move rapidly. The time model: trapezoidal velocity profiles (acceleration, speed limit) for every move, the
-scanner's speed limit on measuring moves, and the robot's move plus alignment per frame.
+scanner's speed limit on measuring moves, and per frame the robot's move or the lift's move plus the
+alignment (`reposition_time`).
 
 Planners are generators per frame: they yield a list of passes (a stage), receive the measured samples of
 those passes (dict pass_id -> samples dict as in scanner/log.py), and may yield more (adaptive planning).
@@ -57,6 +61,9 @@ class DriveConfig:
     frame_width_m: float = 0.35
     robot_move_s: float = 20.0  # drive the platform to the next frame
     robot_align_s: float = 15.0  # align to the wall with the laser scanners (paper, figure 10)
+    lift_move_s: float = 15.0  # raise or lower the drive frame to the next band (walls taller than travel_v_m)
+    lift_travel_m: float = 0.80  # how far the lift raises the drive frame: walls up to travel_v_m + this
+    band_overlap_m: float = 0.05  # stacked bands overlap as much as neighbouring frames do (travel_u - width)
     robot_sigma_m: float = 0.01  # where the robot actually stops vs. commanded (1 sigma per axis)
     robot_sigma_rad: float = 0.002
     loc_sigma_m: float = 0.002  # localization estimate error (1 sigma per axis)
@@ -145,32 +152,80 @@ def frame_pose_inverse(pose: tuple[float, float, float], xy: np.ndarray) -> np.n
 
 @dataclass
 class FrameTarget:
-    """Where the robot is commanded for a frame, and the part of the wall (drive u range) this frame covers."""
+    """Where the robot is commanded for a frame, and the part of the wall this frame covers: drive u range
+    u_lo..u_hi and v range v_lo..v_hi, with the drive frame raised to y_m on the wall (its band's lift)."""
 
     frame_id: int
     x_m: float
     u_lo: float
     u_hi: float
+    y_m: float
+    v_lo: float
+    v_hi: float
+    column: int  # robot position along the wall, 0 at the left
+    band: int  # 0 at the bottom
+
+
+def band_ranges(wall: Wall, drives: DriveConfig) -> list[tuple[float, float, float]]:
+    """Stacked bands of the wall, bottom first: (y_m, v_lo, v_hi) — the lift height of the drive frame on the
+    wall and the drive v range scanned. Each band reaches as high as the drives do and overlaps the one below
+    by band_overlap_m; the lift raises the frame no more than its band needs (y_m + travel_v_m at the band's
+    top), so a wall no taller than travel_v_m is one band (0, 0, height)."""
+    height, travel = wall.height_m, drives.travel_v_m
+    reach = travel + drives.lift_travel_m
+    if height > reach + REACH_TOLERANCE_M:
+        raise InputError(f"{wall.source or 'wall'}: height_m = {height:g} exceeds what the drives reach with the "
+                         f"lift (travel_v_m + lift_travel_m = {travel:g} + {drives.lift_travel_m:g} = {reach:g} m)",
+                         "scan the wall in parts (split the wall file) or configure a longer lift")
+    if not 0.0 <= drives.band_overlap_m < travel:
+        raise InputError(f"band_overlap_m = {drives.band_overlap_m:g}: must lie in 0 ≤ overlap < travel_v_m "
+                         f"({travel:g} m)")
+    bands = []
+    bottom = 0.0
+    while True:
+        top = min(bottom + travel, height)
+        if height - top <= REACH_TOLERANCE_M:
+            top = height
+        lift = round(top - travel, 6) if top - travel > REACH_TOLERANCE_M else 0.0  # µm: exact on the wire
+        bands.append((lift, round(bottom - lift, 6), top if lift == 0.0 else travel))
+        if top >= height:
+            return bands
+        bottom = top - drives.band_overlap_m
 
 
 def frame_targets(wall: Wall, drives: DriveConfig) -> list[FrameTarget]:
     """Frames side by side, `frame_width_m` apart; each scans as far right as the drives reach, so that
-    neighbouring frames overlap by travel_u_m - frame_width_m (objects at a frame's edge are seen whole)."""
-    if wall.height_m > drives.travel_v_m + REACH_TOLERANCE_M:
-        raise InputError(f"{wall.source or 'wall'}: height_m = {wall.height_m:g} exceeds the drives' reach "
-                         f"(travel_v_m = {drives.travel_v_m:g} m)",
-                         "scan the wall in parts (split the wall file) or configure longer drives")
+    neighbouring frames overlap by travel_u_m - frame_width_m (objects at a frame's edge are seen whole).
+    On a wall taller than the drives' reach, each position scans its bands (band_ranges) in turn: upwards at
+    even positions, downwards at odd ones, so the lift moves once per band change and never back idle."""
     if drives.frame_width_m > drives.travel_u_m + REACH_TOLERANCE_M:
         raise InputError(f"frame_width_m = {drives.frame_width_m:g} exceeds the drives' reach "
                          f"(travel_u_m = {drives.travel_u_m:g} m)")
+    bands = band_ranges(wall, drives)
     width = drives.frame_width_m
     count = max(1, math.ceil(wall.width_m / width - 1e-9))
-    frames = []
+    frames: list[FrameTarget] = []
     for i in range(count):
         x0 = i * width
         u_hi = min(wall.width_m - x0, drives.travel_u_m)
-        frames.append(FrameTarget(i, x0, 0.0, u_hi))
+        order = range(len(bands)) if i % 2 == 0 else range(len(bands) - 1, -1, -1)
+        for b in order:
+            y, v_lo, v_hi = bands[b]
+            frames.append(FrameTarget(len(frames), x0, 0.0, u_hi, y, v_lo, v_hi, i, b))
     return frames
+
+
+def reposition_time(previous: FrameTarget | None, target: FrameTarget, drives: DriveConfig) -> float:
+    """Seconds from the end of the previous frame's passes (None: the scan's start) until the robot stands
+    aligned at target: the platform's move to a new position, the lift's move to another band, and the
+    alignment with the lasers after either."""
+    moved = previous is None or target.column != previous.column
+    lifted = previous is not None and target.band != previous.band
+    # a new position starts at the band the lift is at (frame_targets' order): no lift move with the drive
+    seconds = drives.robot_move_s if moved else 0.0
+    if lifted:
+        seconds += drives.lift_move_s
+    return seconds + drives.robot_align_s
 
 
 def check_pass_in_reach(spec: PassSpec, drives: DriveConfig) -> None:
@@ -202,10 +257,10 @@ class DensePlanner:
         return frame_targets(self.wall, self.drives)
 
     def frame_stages(self, frame: FrameTarget) -> StageGenerator:
-        n = math.floor(self.wall.height_m / self.line_spacing_m + 1e-9) + 1
+        n = math.floor((frame.v_hi - frame.v_lo) / self.line_spacing_m + 1e-9) + 1
         passes = []
         for k in range(n):
-            v = round(min(k * self.line_spacing_m, self.wall.height_m), 6)
+            v = round(min(frame.v_lo + k * self.line_spacing_m, frame.v_hi), 6)
             a, b = (frame.u_lo, frame.u_hi) if k % 2 == 0 else (frame.u_hi, frame.u_lo)
             passes.append(PassSpec(frame.frame_id, "raster", "x", (a, v), (b, v)))
         yield passes
@@ -247,9 +302,10 @@ class AdaptiveConfig:
 class AdaptivePlanner:
     """Coarse grid first, then passes placed to confirm, trace and follow what was found.
 
-    Per frame: (1) coarse horizontal passes every `coarse_row_spacing_m` and vertical passes at
-    `coarse_columns`; (2) for every peak found on a coarse pass, a short parallel *confirm* pass offset by
-    `confirm_offset_m` — the peak's shift gives the object's direction; (3) *trace* passes (stage "trace"):
+    Per frame (one band at one robot position, within the band's drive ranges): (1) coarse horizontal
+    passes every `coarse_row_spacing_m` and vertical passes at `coarse_columns`; (2) for every peak found on
+    a coarse pass, a short parallel *confirm* pass offset by `confirm_offset_m` — the peak's shift gives the
+    object's direction; (3) *trace* passes (stage "trace"):
     from each find, nearest first, both ends of the object are followed outward by short crossings, the step
     growing while crossings land where the fitted direction predicts and shrinking where they do not; a lost
     course is searched for on a square around its last crossing, whose every further hit starts a branch;
@@ -274,17 +330,17 @@ class AdaptivePlanner:
 
     def _coarse(self, frame: FrameTarget) -> list[PassSpec]:
         cfg = self.config
-        height = self.wall.height_m
-        rows = np.arange(0.0, height + 1e-9, cfg.coarse_row_spacing_m)
-        if height - rows[-1] > 0.05:
-            rows = np.append(rows, height)
+        bottom, top = frame.v_lo, frame.v_hi
+        rows = np.arange(bottom, top + 1e-9, cfg.coarse_row_spacing_m)
+        if top - rows[-1] > 0.05:
+            rows = np.append(rows, top)
         passes = []
         for k, v in enumerate(np.round(rows, 6)):
             a, b = (frame.u_lo, frame.u_hi) if k % 2 == 0 else (frame.u_hi, frame.u_lo)
             passes.append(PassSpec(frame.frame_id, "coarse", "x", (a, float(v)), (b, float(v))))
         for k, u in enumerate(cfg.coarse_columns):
             u = float(min(u, frame.u_hi))
-            a, b = (0.0, height) if k % 2 == 0 else (height, 0.0)
+            a, b = (bottom, top) if k % 2 == 0 else (top, bottom)
             passes.append(PassSpec(frame.frame_id, "coarse", "y", (u, a), (u, b)))
         return passes
 
@@ -293,11 +349,11 @@ class AdaptivePlanner:
         """A short pass along `axis` at `fixed` (the other coordinate), centred at `centre`, clipped to reach."""
         if axis == "x":
             lo, hi = max(frame.u_lo, centre - half), min(frame.u_hi, centre + half)
-            if hi - lo < 0.02 or not 0.0 <= fixed <= self.wall.height_m:
+            if hi - lo < 0.02 or not frame.v_lo <= fixed <= frame.v_hi:
                 return None
             lo, hi, fixed = round(lo, 6), round(hi, 6), round(fixed, 6)  # µm: exact on the G-code wire
             return PassSpec(frame.frame_id, stage, "x", (lo, fixed), (hi, fixed))
-        lo, hi = max(0.0, centre - half), min(self.wall.height_m, centre + half)
+        lo, hi = max(frame.v_lo, centre - half), min(frame.v_hi, centre + half)
         if hi - lo < 0.02 or not frame.u_lo <= fixed <= frame.u_hi:
             return None
         lo, hi, fixed = round(lo, 6), round(hi, 6), round(fixed, 6)
@@ -379,10 +435,6 @@ class AdaptivePlanner:
             uv = np.array([pos, spec.start_uv[1]]) if spec.axis == "x" else np.array([spec.start_uv[0], pos])
             out.append((uv, height, channel))
         return out
-
-    def _inside(self, frame: FrameTarget, p: np.ndarray, margin: float) -> bool:
-        return bool(frame.u_lo + margin <= p[0] <= frame.u_hi - margin
-                    and margin <= p[1] <= self.wall.height_m - margin)
 
     def _run_track(self, frame: FrameTarget, tr: _Track, chains: list[_Chain],
                    spawn: list[_Track], known: list[tuple[np.ndarray, float, str]]) -> StageGenerator:
@@ -487,8 +539,8 @@ class AdaptivePlanner:
     def _to_edge(self, frame: FrameTarget, p: np.ndarray, d: np.ndarray, margin: float) -> float:
         """Distance from p along d to the edge of the reach (less the margin) it runs towards; negative if p is
         beyond it already."""
-        lo = np.array([frame.u_lo + margin, margin])
-        hi = np.array([frame.u_hi - margin, self.wall.height_m - margin])
+        lo = np.array([frame.u_lo + margin, frame.v_lo + margin])
+        hi = np.array([frame.u_hi - margin, frame.v_hi - margin])
         t = math.inf
         for i in range(2):
             if d[i] > 1e-12:
@@ -522,8 +574,8 @@ class AdaptivePlanner:
             u = float(np.mean([g[0] for g in group]))
             if len(group) < 2 or not owned_lo <= u <= owned_hi:
                 continue
-            lo = max(0.0, min(g[1] for g in group) - cfg.coarse_row_spacing_m)
-            hi = min(self.wall.height_m, max(g[1] for g in group) + cfg.coarse_row_spacing_m)
+            lo = max(frame.v_lo, min(g[1] for g in group) - cfg.coarse_row_spacing_m)
+            hi = min(frame.v_hi, max(g[1] for g in group) + cfg.coarse_row_spacing_m)
             spec = self._short(frame, "stud", "y", u, 0.5 * (lo + hi), 0.5 * (hi - lo))
             if spec is not None:
                 passes.append(spec)
@@ -548,7 +600,11 @@ class AdaptivePlanner:
         # neighbouring frames overlap: a find near the seam is traced by the frame that sees it clear of its edge
         last = frame.u_hi < self.drives.travel_u_m - 1e-9
         owned_hi = frame.u_hi if last else self.drives.frame_width_m + cfg.seam_m
-        owned_lo = frame.u_lo if frame.frame_id == 0 else frame.u_lo + cfg.seam_m
+        owned_lo = frame.u_lo if frame.column == 0 else frame.u_lo + cfg.seam_m
+        # stacked bands overlap likewise; what crosses the seam is found clear of it in both and traced in each
+        top_band = frame.y_m + frame.v_hi >= self.wall.height_m - REACH_TOLERANCE_M
+        owned_v_hi = math.inf if top_band else frame.v_hi - self.drives.band_overlap_m + cfg.seam_m
+        owned_v_lo = -math.inf if frame.band == 0 else frame.v_lo + cfg.seam_m
         known: list[tuple[np.ndarray, float, str]] = []  # the coarse passes' crossings, in drive coordinates
         seeds: list[tuple[np.ndarray, PassSpec, float]] = []
         for spec in coarse:
@@ -561,13 +617,13 @@ class AdaptivePlanner:
             # finds of the same object on other coarse passes are then on a traced course and skipped
             k = min(range(len(seeds)), key=lambda i: float(np.linalg.norm(seeds[i][0] - self._at)))
             p0, spec, pos = seeds.pop(k)
-            if not owned_lo <= p0[0] <= owned_hi:
+            if not (owned_lo <= p0[0] <= owned_hi and owned_v_lo <= p0[1] <= owned_v_hi):
                 continue  # the neighbouring frame finds it clear of its edge and traces it there
             if any(ch.distance(p0) < 2 * cfg.join_m for ch in chains):
                 continue  # the same object, already traced from another find
             # (2) confirm: a parallel short pass beside the find gives the object's local direction
             fixed = spec.start_uv[1] if spec.axis == "x" else spec.start_uv[0]
-            limit = self.wall.height_m if spec.axis == "x" else frame.u_hi
+            limit = frame.v_hi if spec.axis == "x" else frame.u_hi
             offset = cfg.confirm_offset_m if fixed + cfg.confirm_offset_m <= limit else -cfg.confirm_offset_m
             short = self._short(frame, "confirm", spec.axis, fixed + offset, pos, cfg.confirm_half_length_m)
             if short is None:

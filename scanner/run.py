@@ -21,6 +21,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from geometry.errors import InputError
+from scanner.laser import LaserConfig
 from scanner.log import ScanLog
 from scanner.plan import (
     DriveConfig,
@@ -32,6 +33,7 @@ from scanner.plan import (
     make_planner,
     move_position,
     move_time,
+    reposition_time,
     sample_times,
 )
 from scanner.sensor_model import COUNTS_FULL_SCALE, SensorConfig
@@ -134,8 +136,10 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
     all_samples: list[Samples] = []
     frame_rows: list[dict[str, Any]] = []
     measured = 0
+    previous: FrameTarget | None = None
     for target in targets:
-        t += drives.robot_move_s + drives.robot_align_s
+        t += reposition_time(previous, target, drives)
+        previous = target
         if target.frame_id in frames_done:
             row = frames_done[target.frame_id]
             report = FrameReport((row["cmd_x_m"], row["cmd_y_m"], row["cmd_phi_rad"]),
@@ -246,8 +250,8 @@ def _check_same_pass(log: ScanLog | None, row: dict[str, Any], spec: PassSpec, p
 def _estimate_total(planner: Any, targets: list[FrameTarget], drives: DriveConfig) -> float:
     """Scan time estimate for the progress bar: exact for dense, coarse stage × 1.25 for adaptive."""
     total = 0.0
-    for target in targets:
-        total += drives.robot_move_s + drives.robot_align_s
+    for previous, target in zip([None, *targets[:-1]], targets, strict=True):
+        total += reposition_time(previous, target, drives)
         stages = planner.frame_stages(target)
         first = next(stages)
         uv = np.zeros(2)
@@ -280,7 +284,8 @@ def open_for_resume(log_path: str | Path, wall_path: str | Path | None = None) -
 
 
 def simulated_site(wall: Wall, sensor: SensorConfig, drives: DriveConfig, seed: int) -> tuple[SimWorld, SimRobot]:
-    return SimWorld(wall, sensor, drives, seed), SimRobot(drives, seed, wall.width_m)
+    return SimWorld(wall, sensor, drives, seed), SimRobot(drives, seed, wall.width_m,
+                                                          LaserConfig().room_for_wall(wall.height_m))
 
 
 def config_from_meta(meta: dict[str, Any]) -> tuple[SensorConfig, DriveConfig]:

@@ -36,7 +36,9 @@ class FrameReport:
 
 class SimRobot:
     """The platform: stops near the commanded frame pose; its localization estimates where it stopped; with
-    the room's wall width given, its 2-D laser also measures the frame's x against the side walls."""
+    the room's wall width given, its 2-D laser also measures the frame's x against the side walls. A frame
+    the lift raised to another band stops with an error of its own too (the lift's play and the re-alignment;
+    nothing ties it to the band below, so stitching is not helped by an assumption)."""
 
     def __init__(self, drives: DriveConfig, seed: int, wall_width_m: float | None = None,
                  laser: LaserConfig | None = None) -> None:
@@ -48,7 +50,7 @@ class SimRobot:
     def go_to(self, frame: FrameTarget) -> FrameReport:
         d = self.drives
         rng = np.random.default_rng([self.seed, frame.frame_id, 101])
-        commanded = (frame.x_m, 0.0, 0.0)
+        commanded = (frame.x_m, frame.y_m, 0.0)  # y: the lift raises the drive frame to its band
         err = rng.standard_normal(6)
         true = (commanded[0] + d.robot_sigma_m * err[0], commanded[1] + d.robot_sigma_m * err[1],
                 d.robot_sigma_rad * err[2])

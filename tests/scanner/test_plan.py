@@ -51,8 +51,8 @@ def test_frames_cover_the_wall_and_plans_outside_the_reach_are_refused():
     assert len(frames) == 8 and frames[1].x_m == pytest.approx(0.35)
     assert all(f.u_hi <= drives.travel_u_m for f in frames)
     assert frames[-1].x_m + frames[-1].u_hi == pytest.approx(2.5)
-    with pytest.raises(InputError, match=r"tall.yaml: height_m = 2.6 exceeds the drives' reach"):
-        frame_targets(Wall(width_m=1.0, height_m=2.6, source="tall.yaml"), drives)
+    with pytest.raises(InputError, match=r"tall.yaml: height_m = 3 exceeds what the drives reach with the lift"):
+        frame_targets(Wall(width_m=1.0, height_m=3.0, source="tall.yaml"), drives)  # 2.6 m: bands (test_bands.py)
     with pytest.raises(InputError, match=r"u=0.4500 m.*outside the drives' reach"):
         check_pass_in_reach(PassSpec(0, "raster", "x", (0.0, 0.1), (0.45, 0.1)), drives)
     with pytest.raises(InputError, match=r"scan_speed_m_s = 0.1 exceeds the scanner's speed limit"):

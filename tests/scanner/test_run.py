@@ -133,7 +133,7 @@ def test_cli_errors_are_one_line(tmp_path):
     done = subprocess.run(_cli("scan", "--sim", "--wall", str(bad), "--log", str(tmp_path / "x.db")),
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2
-    assert "height_m = 3.5 exceeds the drives' reach" in done.stderr
+    assert "height_m = 3.5 exceeds what the drives reach with the lift" in done.stderr
     assert "Traceback" not in done.stderr
     assert not (tmp_path / "x.db").exists()
 
