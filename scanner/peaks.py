@@ -22,6 +22,9 @@ class PeakConfig:
     grid_step_m: float = 0.0005  # resampling step along the pass (samples are uniform in time, not space)
 
 
+CUT_PEAK_INSIDE_M = 0.005  # a cut peak's maximum at least this far inside the pass: a top, not a slope
+
+
 @dataclass
 class Peak:
     position: float  # metres along the pass coordinate
@@ -30,8 +33,12 @@ class Peak:
 
 
 def detect_peaks(coord: np.ndarray, values: np.ndarray, config: PeakConfig | None = None,
-                 grid_step_m: float | None = None) -> list[Peak]:
-    """Peaks of `values` along `coord`. coord, values : (n,) (metres, display units); any order."""
+                 grid_step_m: float | None = None, keep_cut: bool = False) -> list[Peak]:
+    """Peaks of `values` along `coord`. coord, values : (n,) (metres, display units); any order.
+
+    A peak whose half-maximum lies beyond an end of the pass has no known centre and is dropped, unless
+    keep_cut: then its maximum, if that lies inside the pass, stands for its position (width NaN). A planner
+    needs it where an object lies in the overlap of two frames, cut by both frames' reach."""
     cfg = config or PeakConfig()
     coord = np.asarray(coord, dtype=np.float64)
     values = np.asarray(values, dtype=np.float64)
@@ -57,8 +64,11 @@ def detect_peaks(coord: np.ndarray, values: np.ndarray, config: PeakConfig | Non
     peaks = []
     for i in idx:
         crossings = level_crossings(grid, above, int(i), 0.5 * above[i])
-        if crossings is None:
-            continue  # cut off by the end of the pass: its centre is unknown
+        if crossings is None:  # cut off by the end of the pass: its centre is unknown
+            inside = round(CUT_PEAK_INSIDE_M / step)
+            if keep_cut and inside <= i < len(grid) - inside:
+                peaks.append(Peak(position=float(grid[i]), height=float(above[i]), width=float("nan")))
+            continue
         x_left, x_right = crossings
         peaks.append(Peak(position=0.5 * (x_left + x_right), height=float(above[i]), width=x_right - x_left))
     return peaks

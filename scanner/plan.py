@@ -371,7 +371,7 @@ class AdaptivePlanner:
         found = []
         for channel in ("inductive", "ac"):
             lag = self.sensor_hysteresis_m * direction if channel == "inductive" else 0.0
-            for peak in detect_peaks(coord, samples[channel], self.peaks):
+            for peak in detect_peaks(coord, samples[channel], self.peaks, keep_cut=True):
                 found.append((peak.position - lag, peak.height, peak.width, channel))
         found.sort()
         merged: list[tuple[float, float, float, str]] = []
