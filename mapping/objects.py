@@ -494,8 +494,9 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
     when it rises min_strength robust σ and min_rel of that level above it. features: "base" (what it sits on,
     σ units), "half_width_m" (median over the rays of the distance where it has fallen half-way to the base).
     saturated: the signal value of a saturated reading; a peak on a saturated top (a shallow screw on a steel
-    stud saturates over 3 cm) is that top's middle, not whichever of its equal cells the maximum filter keeps:
-    rays from an off-centre cell would end on the top and read it as what the point sits on.
+    stud saturates over 3 cm) is that top's middle, not whichever of its equal cells the maximum filter keeps,
+    and its rays start at the top's edge (its equivalent radius): rays from an off-centre cell, or too short,
+    would end on the top or its tail and read it as what the point sits on.
     """
     z, _, _ = normalise(signal)
     known = np.isfinite(signal)
@@ -507,6 +508,7 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
         return []
     origin = np.column_stack([rows, cols]).astype(np.float64)  # where the rays start, (row, col)
     on_top = np.zeros(rows.size, bool)
+    radius = np.zeros(rows.size)  # cells: the rays start this far out, at a saturated top's edge
     if saturated is not None:
         top = np.nan_to_num(signal, nan=-np.inf) >= saturated - 1e-9
         labels, n = ndimage.label(top)
@@ -518,15 +520,23 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
             keep = (label == 0) | first  # one peak per saturated top
             on_top = label > 0
             origin[on_top] = middles[label[on_top] - 1]
-            rows, cols, origin, on_top = rows[keep], cols[keep], origin[keep], on_top[keep]
+            areas = ndimage.sum_labels(top, labels, np.arange(1, n + 1))
+            radius[on_top] = np.sqrt(areas[label[on_top] - 1] / np.pi)
+            rows, cols, origin, on_top, radius = rows[keep], cols[keep], origin[keep], on_top[keep], radius[keep]
     angles = np.arange(POINT_RAY_DIRECTIONS) * 2.0 * np.pi / POINT_RAY_DIRECTIONS
     steps = np.arange(0.0, POINT_RAY_M[1] + 1e-9, min(info.resolution, 0.002)) / info.resolution
     far = steps >= POINT_RAY_M[0] / info.resolution
     # (peaks, directions, steps) profiles of the smoothed map along the rays
-    rr = origin[:, 0, None, None] + np.sin(angles)[None, :, None] * steps[None, None, :]
-    cc = origin[:, 1, None, None] + np.cos(angles)[None, :, None] * steps[None, None, :]
+    reach = steps[None, None, :] + radius[:, None, None]
+    rr = origin[:, 0, None, None] + np.sin(angles)[None, :, None] * reach
+    cc = origin[:, 1, None, None] + np.cos(angles)[None, :, None] * reach
     profile = ndimage.map_coordinates(s, [rr.ravel(), cc.ravel()], order=1, mode="nearest").reshape(rr.shape)
-    base = profile[:, :, far].min(axis=2).max(axis=1)
+    # On a sparse map only rays along measured passes tell what the point sits on: a ray counts where its far
+    # end was measured, over its measured steps (between passes the smoothing spreads the peak's own values)
+    seen = ndimage.map_coordinates(w, [rr.ravel(), cc.ravel()], order=1, mode="nearest").reshape(rr.shape) > 0.5
+    ray_low = np.where(seen[:, :, far], profile[:, :, far], np.inf).min(axis=2)
+    base = np.where(seen[:, :, -1], ray_low, -np.inf).max(axis=1)
+    base[~np.isfinite(base)] = np.inf  # no ray measured to its end: nothing to judge the peak against
     height = s[rows, cols]
     bump = height - base
     out = []
@@ -545,7 +555,7 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
         xy = info.to_wall(np.array([[cc_k + off[0], rr_k + off[1]]]))
         below = profile[k] <= (base[k] + 0.5 * bump[k])
         first = np.where(below.any(axis=1), below.argmax(axis=1), len(steps) - 1)
-        half_width = float(np.median(steps[first])) * info.resolution
+        half_width = float(np.median(steps[first]) + radius[k]) * info.resolution
         obj = MapObject("point", xy, 2.0 * half_width, float(bump[k]))
         obj.features["base"] = float(base[k])
         obj.features["half_width_m"] = half_width

@@ -33,12 +33,13 @@ class Peak:
 
 
 def detect_peaks(coord: np.ndarray, values: np.ndarray, config: PeakConfig | None = None,
-                 grid_step_m: float | None = None, keep_cut: bool = False) -> list[Peak]:
+                 grid_step_m: float | None = None, keep_cut: tuple[bool, bool] = (False, False)) -> list[Peak]:
     """Peaks of `values` along `coord`. coord, values : (n,) (metres, display units); any order.
 
     A peak whose half-maximum lies beyond an end of the pass has no known centre and is dropped, unless
-    keep_cut: then its maximum, if that lies inside the pass, stands for its position (width NaN). A planner
-    needs it where an object lies in the overlap of two frames, cut by both frames' reach."""
+    keep_cut says so for that end (low coordinate, high coordinate): then its maximum, if that lies inside the
+    pass, stands for its position (width NaN). A planner needs it where an object lies in the overlap of two
+    frames, cut by both frames' reach."""
     cfg = config or PeakConfig()
     coord = np.asarray(coord, dtype=np.float64)
     values = np.asarray(values, dtype=np.float64)
@@ -66,7 +67,10 @@ def detect_peaks(coord: np.ndarray, values: np.ndarray, config: PeakConfig | Non
         crossings = level_crossings(grid, above, int(i), 0.5 * above[i])
         if crossings is None:  # cut off by the end of the pass: its centre is unknown
             inside = round(CUT_PEAK_INSIDE_M / step)
-            if keep_cut and inside <= i < len(grid) - inside:
+            cut_low = bool(np.all(above[:i + 1] > 0.5 * above[i]))
+            cut_high = bool(np.all(above[i:] > 0.5 * above[i]))
+            if (cut_low != cut_high and keep_cut[0 if cut_low else 1]
+                    and inside <= i < len(grid) - inside):
                 peaks.append(Peak(position=float(grid[i]), height=float(above[i]), width=float("nan")))
             continue
         x_left, x_right = crossings

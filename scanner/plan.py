@@ -286,7 +286,11 @@ class AdaptiveConfig:
     # max_step_m) ahead is taken as the next crossing: the following pass measures the stretch up to it
     follow_rounds: int = 2  # re-crossings where a following pass lost the response, then the stretch is inferred
     follow_min_share: float = 0.7  # of the crossings' peak height: the following pass is still on the object
-    point_half_m: float = 0.04  # half length of the pass across an isolated find (a screw, a nail)
+    point_half_m: float = 0.08  # half length of the pass across an isolated find (a screw, a nail): a coarse
+    # row sees a screw up to 47 mm beside it, so this pass crosses it with 3 cm to spare on its far side
+    point_min_height: float = 0.04  # a weaker peak on a coarse pass, not traced, still gets a pass across it:
+    # a nail 4 cm off the row (the sparse mapper's inductive threshold)
+    fastener_half_m: float = 0.04  # half length of the pass across a bump along a stud or a course (on the pass)
     stud_min_height: float = 0.03  # capacitive peak height (display units) of a stud on a coarse pass ...
     stud_min_width_m: float = 0.04  # ... and its least FWHM: wider than any cable's or pipe's echo
     follow_min_m: float = 0.01  # a stretch shorter than this between two crossings is covered by them
@@ -321,6 +325,8 @@ class AdaptivePlanner:
     peaks: PeakConfig = field(default_factory=PeakConfig)
     report: list[dict[str, Any]] = field(default_factory=list)  # one row per traced object, as frames finish
     _at: np.ndarray = field(default_factory=lambda: np.zeros(2), repr=False)  # where the last pass ended
+    _frame: FrameTarget | None = field(default=None, repr=False)  # the frame being planned
+    _placed: dict[int, tuple[FrameTarget, tuple[float, float, float]]] = field(default_factory=dict, repr=False)
 
     def describe(self) -> dict[str, Any]:
         return {"kind": "adaptive", **self.config.to_dict()}
@@ -359,19 +365,16 @@ class AdaptivePlanner:
         lo, hi, fixed = round(lo, 6), round(hi, 6), round(fixed, 6)
         return PassSpec(frame.frame_id, stage, "y", (fixed, lo), (fixed, hi))
 
-    def _find(self, samples: Samples, axis: str) -> list[tuple[float, float, float]]:
-        """Peaks along a pass in drive coordinates: [(position along axis, height, width)], corrected for the
-        inductive hysteresis (the sensor lags by hysteresis_m along the motion)."""
-        return [(pos, height, width) for pos, height, width, _ in self._peaks(samples, axis)]
-
     def _peaks(self, samples: Samples, axis: str) -> list[tuple[float, float, float, str]]:
-        """[(position, height, width, channel)] of the strongest channel per object along a pass."""
+        """[(position, height, width, channel)] of the strongest channel per object along a pass, corrected
+        for the inductive hysteresis (the sensor lags by hysteresis_m along the motion)."""
         coord = samples["drive_u_m"] if axis == "x" else samples["drive_v_m"]
         direction = float(np.median(samples["direction"])) if len(coord) else 1.0
+        seams = self._seam_ends(coord, axis)
         found = []
         for channel in ("inductive", "ac"):
             lag = self.sensor_hysteresis_m * direction if channel == "inductive" else 0.0
-            for peak in detect_peaks(coord, samples[channel], self.peaks, keep_cut=True):
+            for peak in detect_peaks(coord, samples[channel], self.peaks, keep_cut=seams):
                 found.append((peak.position - lag, peak.height, peak.width, channel))
         found.sort()
         merged: list[tuple[float, float, float, str]] = []
@@ -383,13 +386,77 @@ class AdaptivePlanner:
             merged.append(item)
         return merged
 
+    def _seam_ends(self, coord: np.ndarray, axis: str) -> tuple[bool, bool]:
+        """Whether a pass ends (low end, high end) at the edge of the frame's reach where a neighbouring frame
+        or band takes over: an object in their overlap is cut by both, so its peak there is kept at its top."""
+        f = self._frame
+        if f is None or not len(coord):
+            return False, False
+        if axis == "x":
+            return (f.x_m > 1e-9 and float(coord.min()) <= f.u_lo + 1e-3,
+                    f.x_m + f.u_hi < self.wall.width_m - 1e-6 and float(coord.max()) >= f.u_hi - 1e-3)
+        return (f.y_m > 1e-9 and float(coord.min()) <= f.v_lo + 1e-3,
+                f.y_m + f.v_hi < self.wall.height_m - 1e-6 and float(coord.max()) >= f.v_hi - 1e-3)
+
+    def localise(self, frame: FrameTarget, estimate: tuple[float, float, float]) -> None:
+        """Where the robot's localisation puts the frame (x, y, φ on the wall), before its passes are planned:
+        a frame planned after its neighbour takes over exactly where that one stopped owning finds."""
+        self._placed[frame.frame_id] = (frame, tuple(float(v) for v in estimate))  # type: ignore[assignment]
+
+    def _own_limits(self, frame: FrameTarget) -> tuple[float, float, float, float]:
+        """(u_lo, u_hi, v_lo, v_hi): the part of its reach where a frame traces what it finds, in its own drive
+        coordinates. Neighbouring frames overlap; a find near the seam is traced by the frame that sees it clear
+        of its edge (seam_m into the overlap); what crosses a band's seam is found clear of it in both bands."""
+        cfg = self.config
+        last = frame.u_hi < self.drives.travel_u_m - 1e-9
+        u_hi = frame.u_hi if last else self.drives.frame_width_m + cfg.seam_m
+        u_lo = frame.u_lo if frame.column == 0 else frame.u_lo + cfg.seam_m
+        top_band = frame.y_m + frame.v_hi >= self.wall.height_m - REACH_TOLERANCE_M
+        v_hi = math.inf if top_band else frame.v_hi - self.drives.band_overlap_m + cfg.seam_m
+        v_lo = -math.inf if frame.band == 0 else frame.v_lo + cfg.seam_m
+        return u_lo, u_hi, v_lo, v_hi
+
+    def _owns(self, frame: FrameTarget, p: np.ndarray) -> bool:
+        """Whether this frame traces a find at p (drive coordinates). Against a neighbour planned before it
+        (left, or the other band at this position), the seam is where that neighbour's limit lies on the wall,
+        by both frames' localised poses, less their 3-σ error: the robot stops a centimetre off its command,
+        so limits in each frame's own coordinates would leave finds in a gap that neither frame traces."""
+        u_lo, u_hi, v_lo, v_hi = self._own_limits(frame)
+        me = self._placed.get(frame.frame_id)
+        if me is None:  # not localised (a planner driven without run_scan): each frame's own limits
+            return bool(u_lo <= p[0] <= u_hi and v_lo <= p[1] <= v_hi)
+        d = self.drives
+        margin = 3.0 * math.sqrt(2.0) * (d.loc_sigma_m + d.loc_sigma_rad * d.travel_v_m)
+        wall_p = frame_pose_apply(me[1], p)
+        for other, pose in self._placed.values():
+            if other.frame_id == frame.frame_id:
+                continue
+            if other.band == frame.band and other.column == frame.column - 1:
+                u_lo = -math.inf  # the seam is the left neighbour's limit on the wall
+                q = frame_pose_inverse(pose, wall_p)[0]
+                if q[0] <= self._own_limits(other)[1] - margin:
+                    return False
+            elif other.column == frame.column and abs(other.band - frame.band) == 1:
+                o_lo, o_hi = self._own_limits(other)[2:]
+                q = frame_pose_inverse(pose, wall_p)[0]
+                if other.band < frame.band:
+                    v_lo = -math.inf
+                    if q[1] <= o_hi - margin:
+                        return False
+                else:
+                    v_hi = math.inf
+                    if q[1] >= o_lo + margin:
+                        return False
+        return bool(u_lo <= p[0] <= u_hi and v_lo <= p[1] <= v_hi)
+
     def frame_stages(self, frame: FrameTarget) -> StageGenerator:
+        self._frame = frame
         coarse = self._coarse(frame)
         results = yield coarse
         yield from self._trace(frame, coarse, _by_spec(coarse, results))
 
     def _find_channels(self, samples: Samples, axis: str) -> list[tuple[float, float, str]]:
-        """Like _find, but [(position, height, channel)] of the strongest channel per object."""
+        """[(position, height, channel)] of the strongest channel per object along a pass (see _peaks)."""
         return [(pos, height, channel) for pos, height, _, channel in self._peaks(samples, axis)]
 
     def _cross(self, frame: FrameTarget, q: np.ndarray, d: np.ndarray, half: float,
@@ -423,7 +490,7 @@ class AdaptivePlanner:
                 if on_coarse or any(float(np.linalg.norm(m - q)) < 0.02 for q in seen):
                     continue
                 seen.append(m)
-                spec_across = self._cross(frame, m, d, cfg.point_half_m, "point")
+                spec_across = self._cross(frame, m, d, cfg.fastener_half_m, "point")
                 if spec_across is not None:
                     passes.append(spec_across)
         return [self._oriented(p) for p in passes]
@@ -538,9 +605,12 @@ class AdaptivePlanner:
 
     def _to_edge(self, frame: FrameTarget, p: np.ndarray, d: np.ndarray, margin: float) -> float:
         """Distance from p along d to the edge of the reach (less the margin) it runs towards; negative if p is
-        beyond it already."""
-        lo = np.array([frame.u_lo + margin, frame.v_lo + margin])
-        hi = np.array([frame.u_hi - margin, frame.v_hi - margin])
+        beyond the reach. A course found within the margin of an edge (in the frames' overlap, cut by the edge)
+        runs along it: for that edge the reach itself is the limit."""
+        lo = np.array([frame.u_lo, frame.v_lo])
+        hi = np.array([frame.u_hi, frame.v_hi])
+        lo = np.where(p <= lo + margin + 1e-9, lo, lo + margin)
+        hi = np.where(p >= hi - margin - 1e-9, hi, hi - margin)
         t = math.inf
         for i in range(2):
             if d[i] > 1e-12:
@@ -549,8 +619,35 @@ class AdaptivePlanner:
                 t = min(t, (lo[i] - p[i]) / d[i])
         return float(t)
 
-    def _studs(self, frame: FrameTarget, coarse: list[PassSpec], by_spec: dict[PassSpec, Samples],
-               owned_lo: float, owned_hi: float) -> list[PassSpec]:
+    def _weak_finds(self, frame: FrameTarget, coarse: list[PassSpec], by_spec: dict[PassSpec, Samples],
+                    known: list[tuple[np.ndarray, float, str]], chains: list[_Chain]) -> list[PassSpec]:
+        """A pass across every inductive peak on a coarse pass too weak to trace (point_min_height up to the
+        tracing threshold) that no traced course or stronger find explains: a screw or nail several centimetres
+        off the pass shows only this weakly, and only a pass across places it."""
+        cfg = self.config
+        weak_cfg = PeakConfig(min_height=cfg.point_min_height, min_prominence=0.6 * cfg.point_min_height)
+        passes = []
+        for spec in coarse:
+            samples = by_spec[spec]
+            coord = samples["drive_u_m"] if spec.axis == "x" else samples["drive_v_m"]
+            lag = self.sensor_hysteresis_m * float(np.median(samples["direction"])) if len(coord) else 0.0
+            fixed = spec.start_uv[1] if spec.axis == "x" else spec.start_uv[0]
+            for peak in detect_peaks(coord, samples["inductive"], weak_cfg):
+                if peak.height >= self.peaks.min_height:
+                    continue  # a find the tracing took
+                pos = peak.position - lag
+                p = np.array([pos, fixed]) if spec.axis == "x" else np.array([fixed, pos])
+                if (any(float(np.linalg.norm(p - q)) < 0.03 for q, _, _ in known)
+                        or any(ch.distance(p) < 0.03 for ch in chains) or not self._owns(frame, p)):
+                    continue
+                across = self._short(frame, "point", "y" if spec.axis == "x" else "x", pos, fixed,
+                                     cfg.point_half_m)
+                if across is not None:
+                    passes.append(across)
+        return [self._oriented(p) for p in passes]
+
+    def _studs(self, frame: FrameTarget, coarse: list[PassSpec], by_spec: dict[PassSpec, Samples]
+               ) -> list[PassSpec]:
         """Fastener passes: one vertical pass along each stud (a wide capacitive peak on two or more horizontal
         coarse passes at the same u, no inductive or AC find there), over the rows it was seen on and one row
         spacing beyond."""
@@ -572,7 +669,7 @@ class AdaptivePlanner:
             group = [f for f in found if abs(f[0] - u0) < 0.02]
             found = [f for f in found if abs(f[0] - u0) >= 0.02]
             u = float(np.mean([g[0] for g in group]))
-            if len(group) < 2 or not owned_lo <= u <= owned_hi:
+            if len(group) < 2 or not self._owns(frame, np.array([u, float(np.mean([g[1] for g in group]))])):
                 continue
             lo = max(frame.v_lo, min(g[1] for g in group) - cfg.coarse_row_spacing_m)
             hi = min(frame.v_hi, max(g[1] for g in group) + cfg.coarse_row_spacing_m)
@@ -597,14 +694,6 @@ class AdaptivePlanner:
                 for c in ("inductive", "ac")}
         chains: list[_Chain] = []
         tracks: list[_Track] = []
-        # neighbouring frames overlap: a find near the seam is traced by the frame that sees it clear of its edge
-        last = frame.u_hi < self.drives.travel_u_m - 1e-9
-        owned_hi = frame.u_hi if last else self.drives.frame_width_m + cfg.seam_m
-        owned_lo = frame.u_lo if frame.column == 0 else frame.u_lo + cfg.seam_m
-        # stacked bands overlap likewise; what crosses the seam is found clear of it in both and traced in each
-        top_band = frame.y_m + frame.v_hi >= self.wall.height_m - REACH_TOLERANCE_M
-        owned_v_hi = math.inf if top_band else frame.v_hi - self.drives.band_overlap_m + cfg.seam_m
-        owned_v_lo = -math.inf if frame.band == 0 else frame.v_lo + cfg.seam_m
         known: list[tuple[np.ndarray, float, str]] = []  # the coarse passes' crossings, in drive coordinates
         seeds: list[tuple[np.ndarray, PassSpec, float]] = []
         for spec in coarse:
@@ -617,8 +706,8 @@ class AdaptivePlanner:
             # finds of the same object on other coarse passes are then on a traced course and skipped
             k = min(range(len(seeds)), key=lambda i: float(np.linalg.norm(seeds[i][0] - self._at)))
             p0, spec, pos = seeds.pop(k)
-            if not (owned_lo <= p0[0] <= owned_hi and owned_v_lo <= p0[1] <= owned_v_hi):
-                continue  # the neighbouring frame finds it clear of its edge and traces it there
+            if not self._owns(frame, p0):
+                continue  # the neighbouring frame traces it
             if any(ch.distance(p0) < 2 * cfg.join_m for ch in chains):
                 continue  # the same object, already traced from another find
             # (2) confirm: a parallel short pass beside the find gives the object's local direction
@@ -652,10 +741,13 @@ class AdaptivePlanner:
                 yield from self._run_track(frame, tr, chains, queue, known)
         for tr in tracks:
             tr.stop = tr.stop or "stages"
+        weak = self._weak_finds(frame, coarse, by_spec, known, chains)
+        if weak:
+            yield weak
         # studs: a fastener pass along the centre of every wide capacitive response that no metal explains,
         # found on two coarse rows or more
         along: list[tuple[PassSpec, Samples]] = []  # passes along studs and courses: where fasteners show
-        studs = [self._oriented(p) for p in self._studs(frame, coarse, by_spec, owned_lo, owned_hi)]
+        studs = [self._oriented(p) for p in self._studs(frame, coarse, by_spec)]
         if studs:
             results = yield studs
             along += zip(studs, [results[i] for i in sorted(results)], strict=True)

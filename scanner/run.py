@@ -164,6 +164,9 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
         frame_rows.append(row)
         backend.place_robot(report)
         uv_now = np.zeros(2)  # the drives home at every frame
+        localise = getattr(planner, "localise", None)
+        if localise is not None:  # the adaptive plan hands finds over at seams by where the frames really are
+            localise(target, report.estimate)
         stages = planner.frame_stages(target)
         results: dict[int, Samples] | None = None
         while True:

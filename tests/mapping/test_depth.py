@@ -126,14 +126,10 @@ def test_grid_fallback_when_samples_have_no_passes(dense):
     _check(errors)
 
 
-DIAGONAL_TRACE_BUG = ("with tracing (scanner/plan.py, issue 16) the 45° pipe pipe-d35 is crossed by x and y trace "
-                      "passes; mapping/sparse.py's RANSAC links their peaks into two lines, one 1.7 cm off at the "
-                      "wrong angle (and, being weak, called a power line), and depth.py measures neither")
-
-
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=DIAGONAL_TRACE_BUG)
 def test_adaptive_scan_depths_from_its_passes(tmp_path):
-    """The scanner's own adaptive scan: coarse passes 25 cm apart, short confirm and trace passes."""
+    """The scanner's own adaptive scan: coarse passes 25 cm apart, short confirm and trace passes. (The 45°
+    pipe's x and y trace crossings made two lines, one 1.7 cm off, until the plan laid point passes across
+    the bumps along its following passes; since then the pipe is one line with a depth.)"""
     from scanner.log import ScanLog
     from scanner.plan import DriveConfig
     from scanner.run import DirectBackend, run_scan, scan_meta, simulated_site

@@ -169,3 +169,4 @@ def test_two_sided_background_is_not_fooled_by_lowered_objects():
     raised_only = level + rng.normal(0.0, noise, 100_000)
     raised_only[:60_000] += 0.2
     assert background_level(raised_only, two_sided=True) == background_level(raised_only)
+

@@ -34,3 +34,15 @@ def test_level_crossings_are_interpolated_between_samples_and_none_for_a_cut_off
     left, right = level_crossings(x, y, 5, 5.0)
     assert left == pytest.approx(0.025) and right == pytest.approx(0.075)
     assert level_crossings(x, y, 5, -1.0) is None  # never falls that low inside the profile
+
+
+def test_a_peak_cut_by_the_pass_end_is_kept_at_its_top_only_when_asked():
+    # an object in the overlap of two frames: its half maximum lies beyond the pass's start
+    u = np.linspace(0.0, 0.4, 801)
+    v = 0.02 + 0.5 * np.exp(-0.5 * ((u - 0.01) / 0.012) ** 2)
+    assert detect_peaks(u, v) == []
+    assert detect_peaks(u, v, keep_cut=(False, True)) == []  # only the end asked for
+    (peak,) = detect_peaks(u, v, keep_cut=(True, False))
+    assert peak.position == pytest.approx(0.01, abs=0.001) and np.isnan(peak.width)
+    # a slope falling from the pass's start has no top inside the pass: nothing to trace from it here
+    assert detect_peaks(u, 0.02 + 0.5 * np.exp(-0.5 * ((u + 0.01) / 0.012) ** 2), keep_cut=(True, True)) == []
