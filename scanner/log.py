@@ -36,7 +36,8 @@ Tables
          laser_phi_rad, laser_phi_sigma_rad,                  side walls and floor, distance to and yaw
          laser_dist_m, laser_dist_sigma_m,                    against the scanned wall, each with its 1σ;
          laser_yaw_rad, laser_yaw_sigma_rad)                  NULL without a fix (format 2 only)
-  passes(pass_id INTEGER PRIMARY KEY, frame_id, stage TEXT,   stage: raster | coarse | confirm | trace
+  passes(pass_id INTEGER PRIMARY KEY, frame_id, stage TEXT,   stage: raster | coarse | socket | confirm |
+                                                              trace | stud | follow | point
          axis TEXT, direction INTEGER,                        axis 'x' (moves along drive u) or 'y' (along v);
                                                               direction +1 increasing, -1 decreasing coordinate
          start_u_m, start_v_m, end_u_m, end_v_m,              drive coordinates of the measuring move

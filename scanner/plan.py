@@ -18,6 +18,7 @@ those passes (dict pass_id -> samples dict as in scanner/log.py), and may yield 
 `DensePlanner` is the paper's way: a serpentine raster with 1 cm line spacing. `AdaptivePlanner`: coarse
 horizontal and vertical passes first, then short passes placed to confirm what they found, trace it along its
 course and follow it (using the 1-D peak detector in scanner/peaks.py); STOPPING_RULE says when it stops.
+The installation zones and known sockets (scanner/priors.py) order its passes, PRIORS_RULE says how.
 """
 
 from __future__ import annotations
@@ -32,8 +33,9 @@ import numpy as np
 
 from geometry.errors import InputError
 from scanner.peaks import PeakConfig, detect_peaks
+from scanner.priors import SOCKET_NEAR_M, Priors, wall_priors
 from scanner.sensor_model import additive_units
-from scanner.wall import Wall
+from scanner.wall import Wall, distance_to_polyline
 
 REACH_TOLERANCE_M = 1e-6
 STOPPING_RULE = (
@@ -47,6 +49,12 @@ STOPPING_RULE = (
     "(twice at most). What still falls is left inferred: the drill check calls it unknown. Objects no coarse "
     "pass crosses are not traced; studs (wide capacitive responses on two coarse rows) get one fastener pass "
     "along their centre, isolated finds one short pass across them.")
+PRIORS_RULE = (
+    "Priors order the passes, never replace one: in each frame the coarse passes along a DIN 18015-3 installation "
+    "zone (or past a known socket) run first, then those across a zone, then the rest (the same passes either "
+    "way); finds in a zone whose course runs along it, or at a known socket, are traced first; a known socket "
+    "no coarse pass came near is searched by a square of short passes around it before anything is traced. "
+    "Nothing is mapped from a zone or a socket alone.")
 
 
 @dataclass
@@ -297,6 +305,10 @@ class AdaptiveConfig:
     end_tolerance_m: float = 0.015  # the following pass's response may fall this near a course's end
     fastener_min_rise: float = 0.5  # additive units: a bump this high on a pass along a stud or a course (a
     # screw on a steel stud rises ~4 above the stud's 3, a nail on wood ~1) is crossed by a point pass
+    priors: bool = True  # order passes by the installation zones and known sockets (PRIORS_RULE)
+    socket_search_half_m: float = 0.07  # a known socket no coarse pass came near: a square this far around it
+    # (a box's half side, 3.5 cm, and 3 sigma of the inductive footprint clear of it: it crosses what leaves the
+    # box, not the box)
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -315,7 +327,10 @@ class AdaptivePlanner:
     course is searched for on a square around its last crossing, whose every further hit starts a branch;
     (4) *follow* passes (stage "follow", axis "xy", both drives at once) along each straight run of the traced
     course, re-crossed where their response falls (STOPPING_RULE). `report` gets one row per traced object:
-    its length and the share of it the following passes measured.
+    its length and the share of it the following passes measured, and the zone or socket that had it traced
+    first. With `config.priors` the zones and known sockets order the passes (PRIORS_RULE); `ordered_by`
+    counts per frame and zone or socket the coarse passes it moved forward, the objects it had traced first and
+    the socket searches.
     """
 
     wall: Wall
@@ -324,12 +339,34 @@ class AdaptivePlanner:
     config: AdaptiveConfig = field(default_factory=AdaptiveConfig)
     peaks: PeakConfig = field(default_factory=PeakConfig)
     report: list[dict[str, Any]] = field(default_factory=list)  # one row per traced object, as frames finish
+    ordered_by: dict[int, dict[str, dict[str, int]]] = field(default_factory=dict)  # frame -> zone -> what -> n
     _at: np.ndarray = field(default_factory=lambda: np.zeros(2), repr=False)  # where the last pass ended
     _frame: FrameTarget | None = field(default=None, repr=False)  # the frame being planned
     _placed: dict[int, tuple[FrameTarget, tuple[float, float, float]]] = field(default_factory=dict, repr=False)
+    priors: Priors | None = field(init=False, default=None)
+
+    def __post_init__(self) -> None:
+        self.priors = wall_priors(self.wall) if self.config.priors else None
 
     def describe(self) -> dict[str, Any]:
         return {"kind": "adaptive", **self.config.to_dict()}
+
+    def priors_lines(self) -> list[str]:
+        """What ordered the passes, for the scan's summary: the zones and sockets, and what each moved forward."""
+        if self.priors is None:
+            return ["priors off: passes in the plain coarse order, finds traced nearest first"]
+        totals: dict[str, dict[str, int]] = {}
+        for zones in self.ordered_by.values():
+            for name, counts in zones.items():
+                for what, n in counts.items():
+                    totals.setdefault(name, {}).setdefault(what, 0)
+                    totals[name][what] += n
+        return [self.priors.describe(), *(f"{name}: " + ", ".join(f"{what} {n}" for what, n in counts.items())
+                                          for name, counts in totals.items())]
+
+    def _count(self, frame: FrameTarget, name: str, what: str) -> None:
+        counts = self.ordered_by.setdefault(frame.frame_id, {}).setdefault(name, {})
+        counts[what] = counts.get(what, 0) + 1
 
     def frames(self) -> list[FrameTarget]:
         return frame_targets(self.wall, self.drives)
@@ -403,6 +440,11 @@ class AdaptivePlanner:
         a frame planned after its neighbour takes over exactly where that one stopped owning finds."""
         self._placed[frame.frame_id] = (frame, tuple(float(v) for v in estimate))  # type: ignore[assignment]
 
+    def _pose(self, frame: FrameTarget) -> tuple[float, float, float]:
+        """The frame's pose on the wall (x, y, φ): as localised, else as commanded."""
+        placed = self._placed.get(frame.frame_id)
+        return placed[1] if placed is not None else (frame.x_m, frame.y_m, 0.0)
+
     def _own_limits(self, frame: FrameTarget) -> tuple[float, float, float, float]:
         """(u_lo, u_hi, v_lo, v_hi): the part of its reach where a frame traces what it finds, in its own drive
         coordinates. Neighbouring frames overlap; a find near the seam is traced by the frame that sees it clear
@@ -422,12 +464,11 @@ class AdaptivePlanner:
         by both frames' localised poses, less their 3-σ error: the robot stops a centimetre off its command,
         so limits in each frame's own coordinates would leave finds in a gap that neither frame traces."""
         u_lo, u_hi, v_lo, v_hi = self._own_limits(frame)
-        me = self._placed.get(frame.frame_id)
-        if me is None:  # not localised (a planner driven without run_scan): each frame's own limits
+        if frame.frame_id not in self._placed:  # not localised (driven without run_scan): each frame's own limits
             return bool(u_lo <= p[0] <= u_hi and v_lo <= p[1] <= v_hi)
         d = self.drives
         margin = 3.0 * math.sqrt(2.0) * (d.loc_sigma_m + d.loc_sigma_rad * d.travel_v_m)
-        wall_p = frame_pose_apply(me[1], p)
+        wall_p = frame_pose_apply(self._pose(frame), p)
         for other, pose in self._placed.values():
             if other.frame_id == frame.frame_id:
                 continue
@@ -452,8 +493,61 @@ class AdaptivePlanner:
     def frame_stages(self, frame: FrameTarget) -> StageGenerator:
         self._frame = frame
         coarse = self._coarse(frame)
+        self.ordered_by[frame.frame_id] = {}  # a frame's plan is made afresh (estimates, resumes)
+        if self.priors is not None:
+            coarse = self._zones_first(frame, coarse, self.priors)
         results = yield coarse
         yield from self._trace(frame, coarse, _by_spec(coarse, results))
+
+    def _zones_first(self, frame: FrameTarget, coarse: list[PassSpec], priors: Priors) -> list[PassSpec]:
+        """The same coarse passes, those along a zone first, then those across one, then the rest; within each,
+        nearest end next from where the drives are (they home at every frame), so rapids stay short."""
+        pose = (frame.x_m, frame.y_m, 0.0)  # commanded: the zones are centimetres wide, the robot's error mm
+        scored = []
+        for spec in coarse:
+            a, b = frame_pose_apply(pose, np.array([spec.start_uv, spec.end_uv]))
+            hits = priors.pass_hits(a, b)
+            scored.append((max((score for _, score in hits), default=0.0), hits, spec))
+        ordered: list[PassSpec] = []
+        at = np.zeros(2)
+        for level in sorted({score for score, _, _ in scored}, reverse=True):
+            rest = [(hits, spec) for score, hits, spec in scored if score == level]
+            while rest:
+                k = min(range(len(rest)), key=lambda i: min(math.dist(rest[i][1].start_uv, at),
+                                                             math.dist(rest[i][1].end_uv, at)))
+                hits, spec = rest.pop(k)
+                if math.dist(spec.end_uv, at) < math.dist(spec.start_uv, at):
+                    spec = PassSpec(spec.frame_id, spec.stage, spec.axis, spec.end_uv, spec.start_uv)
+                ordered.append(spec)
+                at = np.array(spec.end_uv)
+                if level > 0:
+                    for name in {name for name, score in hits if score == level}:
+                        self._count(frame, name, "coarse passes first")
+        return ordered
+
+    def _socket_searches(self, frame: FrameTarget, coarse: list[PassSpec], priors: Priors
+                         ) -> list[tuple[str, list[PassSpec]]]:
+        """[(socket name, square of short passes around it)] for each known socket in the part of the frame it
+        owns that no coarse pass came within SOCKET_NEAR_M of: what leaves the box crosses the square."""
+        pose = self._pose(frame)
+        r = self.config.socket_search_half_m
+        out = []
+        for k, socket in enumerate(priors.sockets):
+            c = [float(v) for v in frame_pose_inverse(pose, socket)[0]]
+            if not (frame.u_lo <= c[0] <= frame.u_hi and frame.v_lo <= c[1] <= frame.v_hi
+                    and self._owns(frame, np.array(c))):
+                continue
+            if any(distance_to_polyline(np.array([c]), np.array([p.start_uv, p.end_uv]))[0] <= SOCKET_NEAR_M
+                   for p in coarse):
+                continue  # a coarse pass saw the box or its cable's start: its finds are traced first anyway
+            sides = [self._short(frame, "socket", "x", c[1] - r, c[0], r),
+                     self._short(frame, "socket", "y", c[0] + r, c[1], r),
+                     self._short(frame, "socket", "x", c[1] + r, c[0], r),
+                     self._short(frame, "socket", "y", c[0] - r, c[1], r)]
+            square = [self._oriented(p) for p in sides if p is not None]
+            if square:
+                out.append((f"socket {k + 1}", square))
+        return out
 
     def _find_channels(self, samples: Samples, axis: str) -> list[tuple[float, float, str]]:
         """[(position, height, channel)] of the strongest channel per object along a pass (see _peaks)."""
@@ -695,17 +789,32 @@ class AdaptivePlanner:
         chains: list[_Chain] = []
         tracks: list[_Track] = []
         known: list[tuple[np.ndarray, float, str]] = []  # the coarse passes' crossings, in drive coordinates
-        seeds: list[tuple[np.ndarray, PassSpec, float]] = []
-        for spec in coarse:
-            for p, height, channel in self._crossing_points(spec, by_spec[spec]):
+        seeds: list[tuple[np.ndarray, PassSpec, float, str | None]] = []  # (find, its pass, position, zone)
+        pose = self._pose(frame)
+
+        def add_finds(spec: PassSpec, samples: Samples) -> None:
+            for p, height, channel in self._crossing_points(spec, samples):
                 known.append((p, height, channel))
-                seeds.append((p, spec, float(p[0] if spec.axis == "x" else p[1])))
+                # a find on a horizontal pass lies on a course running roughly vertically, and vice versa
+                zone = None if self.priors is None else self.priors.point_hit(
+                    frame_pose_apply(pose, p)[0], "y" if spec.axis == "x" else "x")
+                seeds.append((p, spec, float(p[0] if spec.axis == "x" else p[1]), zone))
+
+        for spec in coarse:
+            add_finds(spec, by_spec[spec])
         self._at = np.array(coarse[-1].end_uv)
+        if self.priors is not None:  # a known socket no coarse pass came near is looked at before any tracing
+            for name, square in self._socket_searches(frame, coarse, self.priors):
+                results = yield square
+                self._count(frame, name, "searched")
+                for spec, samples in _by_spec(square, results).items():
+                    add_finds(spec, samples)
         while seeds:
-            # nearest seed first, and one object traced to its ends before the next: short rapids, and the
-            # finds of the same object on other coarse passes are then on a traced course and skipped
-            k = min(range(len(seeds)), key=lambda i: float(np.linalg.norm(seeds[i][0] - self._at)))
-            p0, spec, pos = seeds.pop(k)
+            # zone first (priors), then nearest, and one object traced to its ends before the next: short
+            # rapids, and the finds of the same object on other coarse passes are then on a traced course
+            k = min(range(len(seeds)), key=lambda i: (seeds[i][3] is None,
+                                                      float(np.linalg.norm(seeds[i][0] - self._at))))
+            p0, spec, pos, zone = seeds.pop(k)
             if not self._owns(frame, p0):
                 continue  # the neighbouring frame traces it
             if any(ch.distance(p0) < 2 * cfg.join_m for ch in chains):
@@ -730,8 +839,10 @@ class AdaptivePlanner:
                 continue
             p1, h1, ch1 = min(near, key=lambda c: float(np.linalg.norm(c[0] - p0)))
             d = (p1 - p0) / max(float(np.linalg.norm(p1 - p0)), 1e-9)
-            chain = _Chain([p0, p1], [h1, h1], ch1)
+            chain = _Chain([p0, p1], [h1, h1], ch1, zone)
             chains.append(chain)
+            if zone is not None:
+                self._count(frame, zone, "objects traced first")
             sigma = math.sqrt(2.0) * cfg.position_sigma_m / float(np.linalg.norm(p1 - p0))
             step = float(np.clip(0.3 * cfg.cross_half_m / sigma, cfg.min_step_m, cfg.max_step_m))  # see _advance
             queue = [_Track(chain, +1, d, step, sigma), _Track(chain, -1, -d, step, sigma)]
@@ -840,7 +951,7 @@ class AdaptivePlanner:
             ends = sorted(t.stop for t in tracks if t.chain is chain)
             self.report.append({"frame_id": frame.frame_id, "object": k, "channel": chain.channel,
                                 "length_m": round(length, 3), "measured_share": round(measured / length, 3)
-                                if length > 0 else 0.0, "ends": ends})
+                                if length > 0 else 0.0, "ends": ends, "first_in": chain.zone})
 
 @dataclass
 class _Chain:
@@ -849,6 +960,7 @@ class _Chain:
     points: list[np.ndarray]
     heights: list[float]  # peak heights of its crossings (display units over the pass baseline)
     channel: str  # the channel that saw it best: the following passes are judged in it
+    zone: str | None = None  # the zone or socket its first find lay in: why it was traced first (priors)
     segments: list[list[Any]] = field(default_factory=list)  # [a, b, share of the follow pass that saw it]
 
     def distance(self, p: np.ndarray) -> float:

@@ -24,6 +24,7 @@ from geometry.errors import InputError
 from scanner.laser import LaserConfig
 from scanner.log import ScanLog
 from scanner.plan import (
+    AdaptivePlanner,
     DriveConfig,
     FrameTarget,
     PassSpec,
@@ -85,6 +86,7 @@ class ScanResult:
     frames: list[dict[str, Any]] = field(default_factory=list)
     measured_passes: int = 0  # passes measured in this run (the rest came from the log)
     plan_report: list[dict[str, Any]] = field(default_factory=list)  # the planner's traced objects, if it keeps them
+    plan_priors: list[str] = field(default_factory=list)  # what ordered the adaptive plan's passes (scanner.priors)
 
 
 ProgressFn = Callable[[float, float, int], None]  # (scan time so far s, estimated total s, passes done)
@@ -208,7 +210,9 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
     merged = {k: np.concatenate([s[k] for s in all_samples]) for k in all_samples[0]} if all_samples else {}
     if merged:
         merged["seq"] = np.arange(len(merged["time_s"]))
-    return ScanResult(merged, t, pass_id, len(targets), frame_rows, measured, list(getattr(planner, "report", [])))
+    priors = planner.priors_lines() if isinstance(planner, AdaptivePlanner) else []
+    return ScanResult(merged, t, pass_id, len(targets), frame_rows, measured, list(getattr(planner, "report", [])),
+                      priors)
 
 
 def _measure(backend: Backend, pass_id: int, spec: PassSpec, report: FrameReport, t_start: float,

@@ -45,6 +45,18 @@ Format (YAML; JSON with the same keys is accepted; file extension .yaml/.yml/.js
         outline_m: [[1.5, 0.2], [1.8, 0.2], [1.8, 0.6], [1.5, 0.6]]
         depth_m: 0.03
 
+What is known of the wall's surroundings may be added (all optional; files without them are read as before).
+The adaptive planner uses them only to order its passes (scanner/priors.py: DIN 18015-3 installation zones),
+never in place of a measurement; the simulation ignores them:
+
+    room:                          # the room's floor and ceiling in wall coordinates (default: the site
+      floor_y_m: -0.3              #   survey's, LaserConfig.floor_margin_m below y = 0 and room_height_m
+      ceiling_y_m: 2.4             #   above the floor); floor_y_m <= 0, ceiling_y_m >= height_m
+    openings:                      # doors and windows in the wall: polygon outlines inside the wall
+      - kind: door                 # door | window
+        outline_m: [[0.8, 0.0], [1.7, 0.0], [1.7, 2.0], [0.8, 2.0]]
+    sockets: [[0.45, 0.30]]        # known sockets and switches (centres of their boxes), [x, y] metres
+
 All coordinates must lie inside the wall (tolerance 1 mm). Unknown keys are errors, so typos are caught.
 Objects carry their kind-specific fields; fields that do not apply are None in `WallObject`.
 
@@ -79,6 +91,7 @@ KINDS = LINE_KINDS + POINT_KINDS + AREA_KINDS
 METALS = ("copper", "steel", "aluminium")
 PIPE_MATERIALS = ("copper", "steel", "plastic")
 STUD_MATERIALS = ("wood", "steel")
+OPENING_KINDS = ("door", "window")
 PLATE_MATERIALS = ("steel", "aluminium", "copper")
 
 INSIDE_TOLERANCE_M = 1e-3
@@ -171,8 +184,33 @@ class WallObject:
 
 
 @dataclass
+class Opening:
+    """A door or window in the wall: outline_m (n >= 3, 2) closed polygon, metres, wall coordinates."""
+
+    kind: str
+    outline_m: np.ndarray
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "outline_m": [[round(float(v), 6) for v in p] for p in self.outline_m]}
+
+
+@dataclass
+class Room:
+    """The room's floor and ceiling heights in wall coordinates (y up from the wall's bottom edge), metres."""
+
+    floor_y_m: float
+    ceiling_y_m: float
+
+    def to_dict(self) -> dict[str, float]:
+        return {"floor_y_m": round(float(self.floor_y_m), 6), "ceiling_y_m": round(float(self.ceiling_y_m), 6)}
+
+
+@dataclass
 class Wall:
-    """A wall and what is inside it. width_m, height_m in metres; objects in wall coordinates."""
+    """A wall and what is inside it. width_m, height_m in metres; objects in wall coordinates.
+
+    room, openings and sockets are what is known of it beforehand (optional; see the module docstring):
+    sockets : (n, 2) float64, metres, the centres of known socket and switch boxes."""
 
     width_m: float
     height_m: float
@@ -180,11 +218,22 @@ class Wall:
     name: str = ""
     objects: list[WallObject] = field(default_factory=list)
     source: str = ""  # the file it was loaded from, for messages
+    room: Room | None = None
+    openings: list[Opening] = field(default_factory=list)
+    sockets: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     def to_dict(self) -> dict[str, Any]:
-        return {"format": FORMAT, "name": self.name, "width_m": round(float(self.width_m), 6),
-                "height_m": round(float(self.height_m), 6), "material": self.material,
-                "objects": [o.to_dict() for o in self.objects]}
+        out: dict[str, Any] = {"format": FORMAT, "name": self.name, "width_m": round(float(self.width_m), 6),
+                               "height_m": round(float(self.height_m), 6), "material": self.material,
+                               "objects": [o.to_dict() for o in self.objects]}
+        # only what the file declares: a wall without them keeps the fingerprint it always had
+        if self.room is not None:
+            out["room"] = self.room.to_dict()
+        if self.openings:
+            out["openings"] = [o.to_dict() for o in self.openings]
+        if len(self.sockets):
+            out["sockets"] = [[round(float(v), 6) for v in p] for p in self.sockets]
+        return out
 
     def fingerprint(self) -> str:
         """sha256 hex of the canonical JSON content (independent of file format, key order and name)."""
@@ -317,7 +366,7 @@ def wall_from_dict(raw: Any, source: str = "<wall>") -> Wall:
                          f"material and objects (got {type(raw).__name__})")
     if raw.get("format") != FORMAT:
         raise _fail(source, "format", raw.get("format"), f"must be {FORMAT!r}")
-    allowed = {"format", "name", "width_m", "height_m", "material", "objects"}
+    allowed = {"format", "name", "width_m", "height_m", "material", "objects", "room", "openings", "sockets"}
     unknown = set(raw) - allowed
     if unknown:
         key = sorted(unknown)[0]
@@ -344,7 +393,60 @@ def wall_from_dict(raw: Any, source: str = "<wall>") -> Wall:
         if obj.id in seen:
             raise _fail(source, f"objects[{i}].id", obj.id, "is used twice; ids must be unique")
         seen.add(obj.id)
-    return Wall(width_m=width, height_m=height, material=material, name=name, objects=objects, source=source)
+    return Wall(width_m=width, height_m=height, material=material, name=name, objects=objects, source=source,
+                room=_parse_room(source, raw.get("room"), height), openings=_parse_openings(
+                    source, raw.get("openings"), width, height), sockets=_parse_sockets(
+                    source, raw.get("sockets"), width, height))
+
+
+def _parse_room(source: str, raw: Any, wall_h: float) -> Room | None:
+    if raw is None:
+        return None
+    if not isinstance(raw, dict) or set(raw) != {"floor_y_m", "ceiling_y_m"}:
+        raise _fail(source, "room", raw, "must be a mapping with floor_y_m and ceiling_y_m (metres, wall y)")
+    tol = INSIDE_TOLERANCE_M
+    floor = _number(source, "room.floor_y_m", raw["floor_y_m"], -10.0, tol)  # the wall stands on or above it
+    ceiling = _number(source, "room.ceiling_y_m", raw["ceiling_y_m"], wall_h - tol, 20.0)
+    return Room(floor, ceiling)
+
+
+def _parse_openings(source: str, raw: Any, wall_w: float, wall_h: float) -> list[Opening]:
+    if raw is None:
+        return []
+    if not isinstance(raw, list):
+        raise _fail(source, "openings", raw, "must be a list of {kind: door|window, outline_m: [[x, y], ...]}")
+    openings = []
+    for i, item in enumerate(raw):
+        where = f"openings[{i}]"
+        if not isinstance(item, dict):
+            raise _fail(source, where, item, "must be a mapping with kind (door | window) and outline_m")
+        unknown = set(item) - {"kind", "outline_m"}
+        if unknown:
+            key = sorted(unknown)[0]
+            raise _fail(source, f"{where}.{key}", item[key], "is not a field of an opening (allowed: kind, "
+                        "outline_m)")
+        if item.get("kind") not in OPENING_KINDS:
+            raise _fail(source, f"{where}.kind", item.get("kind"), f"must be one of {', '.join(OPENING_KINDS)}")
+        if "outline_m" not in item:
+            raise _fail(source, f"{where}.outline_m", None, "is required (polygon of [x, y] in metres)")
+        outline = _points(source, f"{where}.outline_m", item["outline_m"], wall_w, wall_h, 3)
+        if abs(_polygon_area(outline)) < 1e-6:
+            raise _fail(source, f"{where}.outline_m", item["outline_m"], "encloses no area")
+        openings.append(Opening(item["kind"], outline))
+    return openings
+
+
+def _parse_sockets(source: str, raw: Any, wall_w: float, wall_h: float) -> np.ndarray:
+    if raw is None or raw == []:
+        return np.zeros((0, 2))
+    if not isinstance(raw, list):
+        raise _fail(source, "sockets", raw, "must be a list of [x, y] socket centres in metres")
+    centres = []
+    for i, item in enumerate(raw):
+        if not (isinstance(item, (list, tuple)) and len(item) == 2):
+            raise _fail(source, f"sockets[{i}]", item, "must be one [x, y] point in metres")
+        centres.append(_points(source, f"sockets[{i}]", [item], wall_w, wall_h, 1, 1)[0])
+    return np.array(centres, dtype=np.float64)
 
 
 def load_wall(path: str | Path) -> Wall:

@@ -74,9 +74,9 @@ class PlanStats:
         return self.unknown_m / self.probed_m if self.probed_m else 0.0
 
 
-def scan_and_map(wall, plan: str, seed: int):
-    """Scan `wall` on the simulated site with `plan` (in-process devices), map it as `arproj map` does;
-    returns (scanner.run.ScanResult, mapping.pipeline.MapResult)."""
+def scan_and_map(wall, plan: str, seed: int, options: dict | None = None):
+    """Scan `wall` on the simulated site with `plan` and its `options` (as make_planner takes them; in-process
+    devices), map it as `arproj map` does; returns (scanner.run.ScanResult, mapping.pipeline.MapResult)."""
     from mapping.pipeline import ScanData, build_map
     from scanner.plan import DriveConfig
     from scanner.run import DirectBackend, run_scan, scan_meta, simulated_site
@@ -84,8 +84,9 @@ def scan_and_map(wall, plan: str, seed: int):
 
     sensor, drives = SensorConfig(), DriveConfig()
     world, robot = simulated_site(wall, sensor, drives, seed)
-    scan = run_scan(wall, DirectBackend(world), robot, plan_kind=plan, sensor=sensor, drives=drives)
-    meta = scan_meta(wall, wall.source, {"kind": plan}, sensor, drives, seed, True)
+    scan = run_scan(wall, DirectBackend(world), robot, plan_kind=plan, plan_options=options, sensor=sensor,
+                    drives=drives)
+    meta = scan_meta(wall, wall.source, {"kind": plan, **(options or {})}, sensor, drives, seed, True)
     data = ScanData.from_scan(f"{plan} scan of {wall.name}", scan.samples, scan.frames, meta)
     return scan, build_map(data)
 

@@ -25,7 +25,13 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         sim: bool = typer.Option(False, "--sim", help="Scan the simulated site (device simulators on "
                                  "socket:// URLs, the same code path as hardware)."),
         plan: str = typer.Option("adaptive", "--plan", help="dense (raster, 1 cm lines: the paper's way) or "
-                                 "adaptive (coarse grid, then confirm and trace)."),
+                                 "adaptive (coarse grid, then confirm and trace; DIN 18015-3 installation zones "
+                                 "and the wall file's known sockets and openings order its passes, never replace "
+                                 "one)."),
+        priors: bool = typer.Option(True, "--priors/--no-priors", help="Adaptive plan: let the installation "
+                                    "zones and known sockets order the passes (the same coarse passes either "
+                                    "way; a known socket no coarse pass came near is searched first). A "
+                                    "resumed scan keeps its log's setting."),
         seed: int = typer.Option(0, "--seed", help="Seed of the simulation (robot errors, sensor noise)."),
         faults: float = typer.Option(0.0, "--faults", help="Simulation: probability of a fault per device "
                                      "output line (garbage, truncation, drops, disconnects)."),
@@ -79,10 +85,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                 wall = shipped_walls()[wall.stem]  # a shipped wall by name, e.g. --wall paper_test_plate
             the_wall = load_wall(wall)
             sensor, drives = SensorConfig(), DriveConfig()
-            plan_kind, plan_options = plan, None
+            plan_kind, plan_options = plan, ({"priors": priors} if plan == "adaptive" else None)
             from scanner.plan import make_planner
 
-            planner = make_planner(plan, the_wall, drives, sensor.hysteresis_m)
+            planner = make_planner(plan, the_wall, drives, sensor.hysteresis_m, plan_options)
             planner.frames()  # reach check before a log is created
             scan_log = ScanLog.create(log, scan_meta(the_wall, str(wall), planner.describe(), sensor, drives,
                                                      seed, simulated=True), overwrite=overwrite)
@@ -111,14 +117,18 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         console.print(f"{scan_log.path}: {result.n_frames} frames, {result.n_passes} passes "
                       f"({result.measured_passes} measured now), {n} samples; simulated scan time "
                       f"{_fmt_duration(result.scan_time_s)} ({plan_kind})")
-        if result.plan_report:
-            from scanner.plan import STOPPING_RULE
+        if result.plan_report or result.plan_priors:
+            from scanner.plan import PRIORS_RULE, STOPPING_RULE
 
             console.print(f"stopping rule: {STOPPING_RULE}")
+            console.print(f"priors: {PRIORS_RULE}")
+            for line in result.plan_priors:  # which zones and sockets ordered the passes
+                console.print(f"  {line}")
             for row in result.plan_report:
+                first = f"; traced first: found in {row['first_in']}" if row.get("first_in") else ""
                 console.print(f"  frame {row['frame_id']} object {row['object']} ({row['channel']}): "
                               f"{row['length_m']:.2f} m traced, {100 * row['measured_share']:.0f} % measured "
-                              f"by following passes; ends: {', '.join(row['ends'])}")
+                              f"by following passes; ends: {', '.join(row['ends'])}{first}")
         scan_log.close()
 
     @app.command("scan-plot")
