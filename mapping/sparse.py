@@ -94,9 +94,13 @@ def pass_peaks(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: st
                  if lo - SEAM_REACH_M <= pk.position <= hi + SEAM_REACH_M
                  and all(abs(pk.position - h) > cfg.min_distance_m for h in have)]
         _add_peaks(out, joined, found, global_base, channel)
-    return PassPeaks(np.array(out["xy"]).reshape(-1, 2), np.array(out["height"], dtype=np.float64),
-                     np.array(out["width"], dtype=np.float64), np.array(out["axis"], dtype=np.int64),
-                     np.array(out["pass_id"], dtype=np.int64), global_base)
+    xy_all = np.array(out["xy"]).reshape(-1, 2)
+    # in the order of the wall, not of the passes: the lines found do not depend on the order the plan ran
+    # its passes in (priors reorder them), only on what they measured
+    order = np.lexsort((np.round(xy_all[:, 1], 6), np.round(xy_all[:, 0], 6)))
+    return PassPeaks(xy_all[order], np.array(out["height"], dtype=np.float64)[order],
+                     np.array(out["width"], dtype=np.float64)[order], np.array(out["axis"], dtype=np.int64)[order],
+                     np.array(out["pass_id"], dtype=np.int64)[order], global_base)
 
 
 SEAM_ACROSS_M = 0.012  # passes of two frames this close across (frames land a few mm apart), meeting end to end,
@@ -294,6 +298,43 @@ def _refuted_along(poly: NDArray[np.float64], height: float, baseline: float, xy
     return bool(low[covered].mean() > ALONG_MAX_LOW)
 
 
+EXTEND_REACH_M = 0.30  # a run is extended along a following pass at most this far beyond its end crossing
+
+
+def _extended_along(poly: NDArray[np.float64], heights: NDArray[np.float64], baseline: float,
+                    xy: NDArray[np.float64], values: NDArray[np.float64], axis: NDArray,
+                    channel: str = "inductive") -> NDArray[np.float64]:
+    """The run lengthened at each end as far as a following pass (axis 2) measured it on: bins of ALONG_BIN_M
+    beyond the end crossing, within ALONG_LATERAL_M of its line, each covered, at least half the run's
+    weakest crossing (heights: display units over the background) and at most twice its strongest (additive
+    units): the first bin that is not ends it. The plan follows a course to the wall's edge or its end past
+    its last crossing, and what was measured there is drawn; a rise far above the course's own level is what
+    it runs into (a box), not more of it."""
+    out = poly.copy()
+    follow = (axis > 1) & np.isfinite(values)
+    if not follow.any():
+        return out
+    p, v = xy[follow], values[follow]
+    for end, other in ((1, 0), (0, 1)):
+        u = poly[end] - poly[other]
+        u = u / max(float(np.linalg.norm(u)), 1e-12)
+        rel = p - poly[end]
+        t = rel @ u
+        near = (np.abs(rel[:, 0] * u[1] - rel[:, 1] * u[0]) <= ALONG_LATERAL_M) & (t > 0) & (t <= EXTEND_REACH_M)
+        if not near.any():
+            continue
+        n_bins = int(EXTEND_REACH_M / ALONG_BIN_M)
+        top = np.full(n_bins, -np.inf)
+        np.maximum.at(top, np.minimum((t[near] / ALONG_BIN_M).astype(np.int64), n_bins - 1), v[near])
+        base = float(additive_units(channel, np.array([baseline]))[0])
+        strongest = float(additive_units(channel, np.array([baseline + float(np.max(heights))]))[0]) - base
+        on = (top - baseline >= 0.5 * float(np.min(heights))) & (additive_units(channel, top) - base <= 2 * strongest)
+        k = int(np.argmin(on)) if not on.all() else n_bins  # bins on the object before the first that is not
+        if k:
+            out[end] = poly[end] + u * min(k * ALONG_BIN_M, float(t[near].max()))
+    return out
+
+
 def lines_from_passes(samples: dict[str, NDArray], xy: NDArray[np.float64], lag_m: float,
                       inductive: InductiveModel, params: FusionParams) -> list[MapObject]:
     """Classified line objects from the passes of a (sparse) scan."""
@@ -327,6 +368,7 @@ def _build(peaks: PassPeaks, channel: str, model: InductiveModel, params: Fusion
         # against the run's weakest crossing: a cable running into a box keeps its own level, lower than the box's
         runs = [r for r in runs if not _refuted_along(r[0], float(np.min(peaks.height[r[1]])), peaks.baseline,
                                                       *along)]
+        runs = [(_extended_along(r[0], peaks.height[r[1]], peaks.baseline, *along, channel), r[1]) for r in runs]
     if not runs:
         return []
     polys = [r[0] for r in runs]

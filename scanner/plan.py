@@ -38,6 +38,9 @@ from scanner.sensor_model import additive_units
 from scanner.wall import Wall, distance_to_polyline
 
 REACH_TOLERANCE_M = 1e-6
+# The adaptive planner's behaviour, recorded in every log: a log is resumed only by the planner that made it.
+# 2: fastener passes across bumps and weak finds, seams by localised poses, DIN priors.
+ADAPTIVE_PLANNER_VERSION = 2
 STOPPING_RULE = (
     "Every object a coarse pass finds is traced along its course with crossings whose spacing grows with the "
     "certainty of its direction (a coarse pass's crossing that lies where the course is predicted counts as "
@@ -53,7 +56,8 @@ PRIORS_RULE = (
     "Priors order the passes, never replace one: in each frame the coarse passes along a DIN 18015-3 installation "
     "zone (or past a known socket) run first, then those across a zone, then the rest (the same passes either "
     "way); finds in a zone whose course runs along it, or at a known socket, are traced first; a known socket "
-    "no coarse pass came near is searched by a square of short passes around it before anything is traced. "
+    "no coarse pass came near is searched by a square of short passes around it and one across it before "
+    "anything is traced. "
     "Nothing is mapped from a zone or a socket alone.")
 
 
@@ -349,7 +353,7 @@ class AdaptivePlanner:
         self.priors = wall_priors(self.wall) if self.config.priors else None
 
     def describe(self) -> dict[str, Any]:
-        return {"kind": "adaptive", **self.config.to_dict()}
+        return {"kind": "adaptive", "planner_version": ADAPTIVE_PLANNER_VERSION, **self.config.to_dict()}
 
     def priors_lines(self) -> list[str]:
         """What ordered the passes, for the scan's summary: the zones and sockets, and what each moved forward."""
@@ -527,8 +531,9 @@ class AdaptivePlanner:
 
     def _socket_searches(self, frame: FrameTarget, coarse: list[PassSpec], priors: Priors
                          ) -> list[tuple[str, list[PassSpec]]]:
-        """[(socket name, square of short passes around it)] for each known socket in the part of the frame it
-        owns that no coarse pass came within SOCKET_NEAR_M of: what leaves the box crosses the square."""
+        """[(socket name, a square of short passes around it and one across it)] for each known socket in the
+        part of the frame it owns that no coarse pass came within SOCKET_NEAR_M of: what leaves the box crosses
+        the square, the box itself the pass across."""
         pose = self._pose(frame)
         r = self.config.socket_search_half_m
         out = []
@@ -543,7 +548,8 @@ class AdaptivePlanner:
             sides = [self._short(frame, "socket", "x", c[1] - r, c[0], r),
                      self._short(frame, "socket", "y", c[0] + r, c[1], r),
                      self._short(frame, "socket", "x", c[1] + r, c[0], r),
-                     self._short(frame, "socket", "y", c[0] - r, c[1], r)]
+                     self._short(frame, "socket", "y", c[0] - r, c[1], r),
+                     self._short(frame, "socket", "x", c[1], c[0], r)]  # and across the box itself
             square = [self._oriented(p) for p in sides if p is not None]
             if square:
                 out.append((f"socket {k + 1}", square))
@@ -1055,6 +1061,17 @@ def _by_spec(passes: list[PassSpec], results: dict[int, Samples]) -> dict[PassSp
     return dict(zip(passes, (results[i] for i in ids), strict=True))
 
 
+def check_planner_version(plan: dict[str, Any], source: str = "plan", logged: bool = False) -> None:
+    """InputError unless an adaptive plan's recorded planner version is this one's (a log's plan without one
+    was made by version 1); a new plan's options need not name it."""
+    version = plan.get("planner_version", 1 if logged else ADAPTIVE_PLANNER_VERSION)
+    if version != ADAPTIVE_PLANNER_VERSION:
+        raise InputError(f"{source}: planned by adaptive planner version {version}; this arproj plans version "
+                         f"{ADAPTIVE_PLANNER_VERSION} (passes across fasteners, seams by the robot's "
+                         "localisation, DIN 18015-3 priors), which would lay other passes",
+                         "finish the scan with the arproj that started it, or start a new log")
+
+
 def make_planner(kind: str, wall: Wall, drives: DriveConfig, hysteresis_m: float = 0.003,
                  options: dict[str, Any] | None = None) -> DensePlanner | AdaptivePlanner:
     """A planner by name ('dense' or 'adaptive') with optional parameters (as recorded in a log's meta)."""
@@ -1062,6 +1079,8 @@ def make_planner(kind: str, wall: Wall, drives: DriveConfig, hysteresis_m: float
     if kind == "dense":
         return DensePlanner(wall, drives, **options)
     if kind == "adaptive":
+        check_planner_version(options)
+        options.pop("planner_version", None)
         cfg = AdaptiveConfig(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in options.items()})
         return AdaptivePlanner(wall, drives, hysteresis_m, cfg)
     raise InputError(f"plan = {kind!r}: unknown plan", "use dense or adaptive")

@@ -30,6 +30,7 @@ from scanner.plan import (
     PassSpec,
     Samples,
     check_pass_in_reach,
+    check_planner_version,
     frame_pose_apply,
     make_planner,
     move_position,
@@ -274,6 +275,13 @@ def _estimate_total(planner: Any, targets: list[FrameTarget], drives: DriveConfi
 def open_for_resume(log_path: str | Path, wall_path: str | Path | None = None) -> tuple[ScanLog, Wall]:
     """Open a log to continue it; the wall comes from --wall (checked against the log) or the log itself."""
     log = ScanLog.open(log_path, writable=True)
+    plan = log.meta.get("plan") or {}
+    if plan.get("kind") == "adaptive":
+        try:
+            check_planner_version(plan, str(log_path), logged=True)
+        except InputError:
+            log.close()
+            raise
     if wall_path is not None:
         wall = load_wall(wall_path)
         log.check_wall(wall.fingerprint(), str(wall_path))

@@ -429,3 +429,19 @@ def test_a_pipe_in_the_overlap_of_two_frames_is_crossed_by_their_passes_joined()
     assert on_pipe.sum() == 3  # one per row, none lost at the seam, none twice
     (line,) = lines_from_passes(samples, xy, SensorConfig().hysteresis_m, InductiveModel(), FusionParams())
     assert distances_to_polyline(line.points_m, np.array([[x, 0.0], [x, 0.8]])).max() < 0.003
+
+
+def test_a_run_is_drawn_on_as_far_as_a_following_pass_measured_it_and_stops_at_a_box():
+    from mapping.sparse import _extended_along
+
+    # crossings from y 0.30 to 0.60 on a vertical cable at x 0.2; a following pass along it from y 0.10 to 0.70
+    # sees the cable's level (0.2 over a 0.02 background) down to 0.15, and a box (0.95) from 0.12 down to 0.10
+    run = np.array([[0.2, 0.30], [0.2, 0.60]])
+    y = np.linspace(0.10, 0.70, 601)
+    xy = np.column_stack([np.full_like(y, 0.2), y])
+    values = np.where(y >= 0.15, 0.22, np.where(y >= 0.125, 0.5, 0.95))
+    ext = _extended_along(run, np.array([0.2, 0.2]), 0.02, xy, values, np.full(len(y), 2))
+    assert ext[0, 1] == pytest.approx(0.15, abs=0.011)  # down to where the box begins, not into it
+    assert ext[1, 1] == pytest.approx(0.70, abs=0.011)  # up to the end of what was followed
+    # a pass that is no following pass (a crossing) extends nothing
+    assert np.array_equal(_extended_along(run, np.array([0.2, 0.2]), 0.02, xy, values, np.zeros(len(y))), run)

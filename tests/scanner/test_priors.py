@@ -7,7 +7,7 @@ import pytest
 
 from geometry.errors import InputError
 from scanner.log import ScanLog
-from scanner.plan import AdaptivePlanner, DriveConfig, PassSpec, make_planner
+from scanner.plan import AdaptivePlanner, DriveConfig, PassSpec, frame_pose_apply, make_planner
 from scanner.priors import CROSS_SCORE, wall_priors
 from scanner.run import DirectBackend, ScanCrashError, open_for_resume, run_scan, scan_meta, simulated_site
 from scanner.sensor_model import SensorConfig
@@ -133,9 +133,12 @@ def test_a_known_socket_between_coarse_rows_is_searched_first_and_mapped(recorde
     scan, result = scan_and_map(wall, "adaptive", 1, {"priors": True})
     stages = [p.stage for p in recorded]
     n_coarse = stages.count("coarse")
-    assert stages[n_coarse:n_coarse + 4] == ["socket"] * 4  # looked at before anything is traced
-    for p in recorded[n_coarse:n_coarse + 4]:
-        assert np.linalg.norm(np.add(p.start_uv, p.end_uv) / 2 - centre) <= 0.071  # a square around it
+    assert stages[n_coarse:n_coarse + 5] == ["socket"] * 5  # looked at before anything is traced
+    f = scan.frames[0]
+    pose = (f["est_x_m"], f["est_y_m"], f["est_phi_rad"])  # the square is laid where the robot localised itself
+    for p in recorded[n_coarse:n_coarse + 5]:
+        middle = frame_pose_apply(pose, np.add(p.start_uv, p.end_uv) / 2)[0]
+        assert np.linalg.norm(middle - centre) <= 0.071  # a square around it
     assert scan.plan_report[0]["first_in"] == "socket 1"
     assert area_recall(result.objects, wall)[0] == 1  # the box: a metal object at its middle
     assert evaluate(result.objects, wall).n_found == 1  # and its cable

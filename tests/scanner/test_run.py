@@ -153,3 +153,16 @@ def test_frames_in_the_log_carry_the_laser_fix(tmp_path):
         truth = f[("true_x_m", "true_y_m", "true_phi_rad")[axis]]
         sigma = f[key.replace("_m", "_sigma_m") if axis < 2 else "laser_phi_sigma_rad"]
         assert np.all(np.abs(f[key] - truth) < 5 * sigma)  # 5 σ: p ≈ 6e-7 per value if σ is honest
+
+
+def test_an_adaptive_log_from_an_earlier_planner_is_refused_on_resume_with_a_clear_line(tmp_path):
+    # the planner's passes changed (fasteners, seams, priors): resuming would lay passes the log does not hold
+    from scanner.plan import ADAPTIVE_PLANNER_VERSION
+
+    wall = load_wall(shipped_walls()["small_test_wall"])
+    path = tmp_path / "old.db"
+    ScanLog.create(path, scan_meta(wall, "small", {"kind": "adaptive"}, SensorConfig(), DriveConfig(), 1,
+                                   simulated=True)).close()
+    with pytest.raises(InputError, match=f"planner version 1; this arproj plans version {ADAPTIVE_PLANNER_VERSION}"):
+        open_for_resume(path)
+    ScanLog.open(path, writable=True).close()  # refused, not locked or changed
