@@ -32,6 +32,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                     "zones and known sockets order the passes (the same coarse passes either "
                                     "way; a known socket no coarse pass came near is searched first). A "
                                     "resumed scan keeps its log's setting."),
+        row_spacing: float = typer.Option(0.25, "--row-spacing", help="Adaptive plan: metres between its coarse "
+                                          "rows. 0.25 finds every pipe and cable at about 1/5 of the dense "
+                                          "raster's time; a loose screw shows only within 4 cm of a row, so "
+                                          "0.075 finds those too, at about 0.3 of it."),
         seed: int = typer.Option(0, "--seed", help="Seed of the simulation (robot errors, sensor noise)."),
         faults: float = typer.Option(0.0, "--faults", help="Simulation: probability of a fault per device "
                                      "output line (garbage, truncation, drops, disconnects)."),
@@ -85,7 +89,12 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                 wall = shipped_walls()[wall.stem]  # a shipped wall by name, e.g. --wall paper_test_plate
             the_wall = load_wall(wall)
             sensor, drives = SensorConfig(), DriveConfig()
-            plan_kind, plan_options = plan, ({"priors": priors} if plan == "adaptive" else None)
+            if not 0.02 <= row_spacing <= the_wall.height_m:
+                raise InputError(f"--row-spacing = {row_spacing:g} m: must lie between 0.02 m and the wall's height "
+                                 f"({the_wall.height_m:g} m)", "the default 0.25 is the plan's; 0.075 finds loose "
+                                 "fasteners too")
+            plan_kind, plan_options = plan, ({"priors": priors, "coarse_row_spacing_m": row_spacing}
+                                             if plan == "adaptive" else None)
             from scanner.plan import make_planner
 
             planner = make_planner(plan, the_wall, drives, sensor.hysteresis_m, plan_options)

@@ -166,3 +166,20 @@ def test_an_adaptive_log_from_an_earlier_planner_is_refused_on_resume_with_a_cle
     with pytest.raises(InputError, match=f"planner version 1; this arproj plans version {ADAPTIVE_PLANNER_VERSION}"):
         open_for_resume(path)
     ScanLog.open(path, writable=True).close()  # refused, not locked or changed
+
+
+def test_the_adaptive_row_spacing_is_an_option_recorded_in_the_log_and_checked(tmp_path):
+    path = tmp_path / "rows.db"
+    done = subprocess.run(_cli("scan", "--sim", "--fast", "--wall", str(SMALL), "--log", str(path),
+                               "--row-spacing", "0.1"), capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    with ScanLog.open(path) as log:
+        assert log.meta["plan"]["coarse_row_spacing_m"] == 0.1
+        rows = {round(float(v), 6) for v, a, s in zip(log.passes()["start_v_m"], log.passes()["axis"],
+                                                       log.passes()["stage"], strict=True)
+                if a == "x" and s == "coarse"}
+    assert {0.0, 0.1, 0.2} <= rows
+    bad = subprocess.run(_cli("scan", "--sim", "--wall", str(SMALL), "--log", str(tmp_path / "x.db"),
+                              "--row-spacing", "25"), capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "--row-spacing = 25 m" in bad.stderr and "Traceback" not in bad.stderr
+    assert not (tmp_path / "x.db").exists()
