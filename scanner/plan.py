@@ -583,10 +583,9 @@ class AdaptivePlanner:
             t = (uv - a) @ d
             for peak in detect_peaks(t, additive_units("inductive", samples["inductive"]), rise):
                 m = a + peak.position * d
-                across = "x" if abs(d[1]) >= abs(d[0]) else "y"  # a coarse pass along the course crosses nothing
-                on_coarse = any(c.axis == across and abs(c.start_uv[1 if across == "x" else 0] - m[1 if across ==
-                                                                                                 "x" else 0]) < 0.01
-                                for c in coarse)
+                # a coarse pass across the course through the bump crosses it already (one along it does not)
+                across, fixed = ("x", 1) if abs(d[1]) >= abs(d[0]) else ("y", 0)
+                on_coarse = any(c.axis == across and abs(c.start_uv[fixed] - m[fixed]) < 0.01 for c in coarse)
                 if on_coarse or any(float(np.linalg.norm(m - q)) < 0.02 for q in seen):
                     continue
                 seen.append(m)
