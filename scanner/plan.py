@@ -615,10 +615,13 @@ class AdaptivePlanner:
             head = tr.head()
             if tr.ring:
                 r = cfg.ring_half_m
-                sides = [self._short(frame, "trace", "x", head[1] - r, head[0], r),
-                         self._short(frame, "trace", "y", head[0] + r, head[1], r),
-                         self._short(frame, "trace", "x", head[1] + r, head[0], r),
-                         self._short(frame, "trace", "y", head[0] - r, head[1], r)]
+                # each side runs on past the square's corners by a crossing's half length: a course leaving
+                # near a corner is crossed clear of the pass's end (a deep pipe's peak is 4 cm wide)
+                half = r + cfg.cross_half_m
+                sides = [self._short(frame, "trace", "x", head[1] - r, head[0], half),
+                         self._short(frame, "trace", "y", head[0] + r, head[1], half),
+                         self._short(frame, "trace", "x", head[1] + r, head[0], half),
+                         self._short(frame, "trace", "y", head[0] - r, head[1], half)]
                 batch = [self._oriented(p) for p in sides if p is not None]
                 results = yield batch
                 tr.ring = False
