@@ -615,9 +615,9 @@ class AdaptivePlanner:
             head = tr.head()
             if tr.ring:
                 r = cfg.ring_half_m
-                # each side runs on past the square's corners by a crossing's half length: a course leaving
+                # each side runs on past the square's corners by half a crossing's half length: a course leaving
                 # near a corner is crossed clear of the pass's end (a deep pipe's peak is 4 cm wide)
-                half = r + cfg.cross_half_m
+                half = r + 0.5 * cfg.cross_half_m
                 sides = [self._short(frame, "trace", "x", head[1] - r, head[0], half),
                          self._short(frame, "trace", "y", head[0] + r, head[1], half),
                          self._short(frame, "trace", "x", head[1] + r, head[0], half),

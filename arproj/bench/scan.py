@@ -4,6 +4,7 @@ own path (mapping.pipeline.build_map) on hard-case walls and random walls (2.5 m
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -40,6 +41,7 @@ class PlanStats:
     fasteners_found: int = 0
     fasteners: int = 0
     areas_found: int = 0
+    areas_missed: list[str] = field(default_factory=list)  # kind (and material) of each missed area object
     areas: int = 0
     depth_errors_m: list[float] = field(default_factory=list)  # |mapped - true| of objects lying on a true one
     as_wood: list[str] = field(default_factory=list)  # "wall: id" of true pipes and cables labelled wood
@@ -115,7 +117,9 @@ def _score(stats: PlanStats, wall, scan, result) -> None:
     found, total = fastener_recall(result.objects, wall)
     stats.fasteners_found += found
     stats.fasteners += total
-    found, total, _ = area_recall(result.objects, wall)
+    found, total, missed = area_recall(result.objects, wall)
+    kinds = {o.id: f"{o.kind}{f' ({o.material})' if o.kind in ('stud', 'plate') else ''}" for o in wall.objects}
+    stats.areas_missed += [kinds[i] for i in missed]
     stats.areas_found += found
     stats.areas += total
     stats.depth_errors_m += [abs(e) for _, e, _ in depth_errors(result.objects, wall)]
@@ -260,6 +264,10 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
         + (f": {', '.join(as_wood)}." if as_wood else "; none."),
         "targets: each figure is the adaptive plan's worst over the wall sets (highest for false-safe and depth "
         "error), the peer the dense raster's the same way.",
+        "areas missed: " + "; ".join(
+            f"{name}: {plan}: " + (", ".join(f"{n} {k}" for k, n in sorted(Counter(st.areas_missed).items()))
+                                   or "none")
+            for (name, plan), st in stats.items() if st.areas) + ".",
         f"time ratio adaptive/dense: hard-case {ratio['hard-case']:.3f}, random {ratio['random']:.3f}.",
         f"'{FINE}': the adaptive plan with coarse rows {100 * FINE_ROW_SPACING_M:g} cm apart (`arproj scan "
         f"--row-spacing {FINE_ROW_SPACING_M}`), not judged: a row sees a screw or nail only within 39-47 mm of it "
