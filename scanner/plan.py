@@ -615,9 +615,10 @@ class AdaptivePlanner:
             head = tr.head()
             if tr.ring:
                 r = cfg.ring_half_m
-                # each side runs on past the square's corners by half a crossing's half length: a course leaving
-                # near a corner is crossed clear of the pass's end (a deep pipe's peak is 4 cm wide)
-                half = r + 0.5 * cfg.cross_half_m
+                # an inductive course's square runs each side on past its corners by a crossing's half length:
+                # one leaving near a corner is crossed clear of the pass's end (a deep pipe's peak is 4 cm
+                # wide; a live cable's AC crest, about 2 cm, is clear of it already)
+                half = r + (cfg.cross_half_m if tr.chain.channel == "inductive" else 0.0)
                 sides = [self._short(frame, "trace", "x", head[1] - r, head[0], half),
                          self._short(frame, "trace", "y", head[0] + r, head[1], half),
                          self._short(frame, "trace", "x", head[1] + r, head[0], half),
