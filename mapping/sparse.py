@@ -287,15 +287,21 @@ def _refuted_along(poly: NDArray[np.float64], height: float, baseline: float, xy
     near = parallel & np.isfinite(values) & (off <= ALONG_LATERAL_M) & (t >= 0.0) & (t <= length)
     if not near.any():
         return False
-    bins = np.minimum((t[near] / ALONG_BIN_M).astype(np.int64), int(length / ALONG_BIN_M))
     n_bins = int(length / ALONG_BIN_M) + 1
-    top = np.full(n_bins, -np.inf)
-    np.maximum.at(top, bins, values[near])
+    top = _top_by_bin(t[near], values[near], n_bins)
     covered = np.isfinite(top)
     if covered.sum() < ALONG_MIN_COVER * n_bins:
         return False
     low = top - baseline < 0.5 * height
     return bool(low[covered].mean() > ALONG_MAX_LOW)
+
+
+def _top_by_bin(t: NDArray[np.float64], values: NDArray[np.float64], n_bins: int) -> NDArray[np.float64]:
+    """The highest value in each ALONG_BIN_M bin of t ≥ 0 (the last bin takes what lies beyond); −inf where
+    no sample fell."""
+    top = np.full(n_bins, -np.inf)
+    np.maximum.at(top, np.minimum((t / ALONG_BIN_M).astype(np.int64), n_bins - 1), values)
+    return top
 
 
 EXTEND_REACH_M = 0.30  # a run is extended along a following pass at most this far beyond its end crossing
@@ -315,6 +321,9 @@ def _extended_along(poly: NDArray[np.float64], heights: NDArray[np.float64], bas
     if not follow.any():
         return out
     p, v = xy[follow], values[follow]
+    base = float(additive_units(channel, np.array([baseline]))[0])
+    strongest = float(additive_units(channel, np.array([baseline + float(np.max(heights))]))[0]) - base
+    n_bins = int(EXTEND_REACH_M / ALONG_BIN_M)
     for end, other in ((1, 0), (0, 1)):
         u = poly[end] - poly[other]
         u = u / max(float(np.linalg.norm(u)), 1e-12)
@@ -323,11 +332,7 @@ def _extended_along(poly: NDArray[np.float64], heights: NDArray[np.float64], bas
         near = (np.abs(rel[:, 0] * u[1] - rel[:, 1] * u[0]) <= ALONG_LATERAL_M) & (t > 0) & (t <= EXTEND_REACH_M)
         if not near.any():
             continue
-        n_bins = int(EXTEND_REACH_M / ALONG_BIN_M)
-        top = np.full(n_bins, -np.inf)
-        np.maximum.at(top, np.minimum((t[near] / ALONG_BIN_M).astype(np.int64), n_bins - 1), v[near])
-        base = float(additive_units(channel, np.array([baseline]))[0])
-        strongest = float(additive_units(channel, np.array([baseline + float(np.max(heights))]))[0]) - base
+        top = _top_by_bin(t[near], v[near], n_bins)
         on = (top - baseline >= 0.5 * float(np.min(heights))) & (additive_units(channel, top) - base <= 2 * strongest)
         k = int(np.argmin(on)) if not on.all() else n_bins  # bins on the object before the first that is not
         if k:

@@ -409,12 +409,11 @@ class AdaptivePlanner:
     def _peaks(self, samples: Samples, axis: str) -> list[tuple[float, float, float, str]]:
         """[(position, height, width, channel)] of the strongest channel per object along a pass, corrected
         for the inductive hysteresis (the sensor lags by hysteresis_m along the motion)."""
-        coord = samples["drive_u_m"] if axis == "x" else samples["drive_v_m"]
-        direction = float(np.median(samples["direction"])) if len(coord) else 1.0
+        coord, inductive_lag = self._along(samples, axis)
         seams = self._seam_ends(coord, axis)
         found = []
         for channel in ("inductive", "ac"):
-            lag = self.sensor_hysteresis_m * direction if channel == "inductive" else 0.0
+            lag = inductive_lag if channel == "inductive" else 0.0
             for peak in detect_peaks(coord, samples[channel], self.peaks, keep_cut=seams):
                 found.append((peak.position - lag, peak.height, peak.width, channel))
         found.sort()
@@ -426,6 +425,13 @@ class AdaptivePlanner:
                 continue
             merged.append(item)
         return merged
+
+    def _along(self, samples: Samples, axis: str) -> tuple[np.ndarray, float]:
+        """(drive coordinate along the pass, the inductive channel's lag along it): the sensor reports what it
+        saw hysteresis_m earlier along the motion."""
+        coord = samples["drive_u_m"] if axis == "x" else samples["drive_v_m"]
+        direction = float(np.median(samples["direction"])) if len(coord) else 1.0
+        return coord, self.sensor_hysteresis_m * direction
 
     def _seam_ends(self, coord: np.ndarray, axis: str) -> tuple[bool, bool]:
         """Whether a pass ends (low end, high end) at the edge of the frame's reach where a neighbouring frame
@@ -474,16 +480,17 @@ class AdaptivePlanner:
         margin = 3.0 * math.sqrt(2.0) * (d.loc_sigma_m + d.loc_sigma_rad * d.travel_v_m)
         wall_p = frame_pose_apply(self._pose(frame), p)
         for other, pose in self._placed.values():
-            if other.frame_id == frame.frame_id:
+            left = other.band == frame.band and other.column == frame.column - 1
+            stacked = other.column == frame.column and abs(other.band - frame.band) == 1
+            if not (left or stacked):
                 continue
-            if other.band == frame.band and other.column == frame.column - 1:
+            q = frame_pose_inverse(pose, wall_p)[0]  # p in the neighbour's drive coordinates
+            if left:
                 u_lo = -math.inf  # the seam is the left neighbour's limit on the wall
-                q = frame_pose_inverse(pose, wall_p)[0]
                 if q[0] <= self._own_limits(other)[1] - margin:
                     return False
-            elif other.column == frame.column and abs(other.band - frame.band) == 1:
+            else:
                 o_lo, o_hi = self._own_limits(other)[2:]
-                q = frame_pose_inverse(pose, wall_p)[0]
                 if other.band < frame.band:
                     v_lo = -math.inf
                     if q[1] <= o_hi - margin:
@@ -581,10 +588,10 @@ class AdaptivePlanner:
             d = (b - a) / max(float(np.linalg.norm(b - a)), 1e-9)
             uv = np.column_stack([samples["drive_u_m"], samples["drive_v_m"]])
             t = (uv - a) @ d
+            # a coarse pass across the course through a bump crosses it already (one along it does not)
+            across, fixed = ("x", 1) if abs(d[1]) >= abs(d[0]) else ("y", 0)
             for peak in detect_peaks(t, additive_units("inductive", samples["inductive"]), rise):
                 m = a + peak.position * d
-                # a coarse pass across the course through the bump crosses it already (one along it does not)
-                across, fixed = ("x", 1) if abs(d[1]) >= abs(d[0]) else ("y", 0)
                 on_coarse = any(c.axis == across and abs(c.start_uv[fixed] - m[fixed]) < 0.01 for c in coarse)
                 if on_coarse or any(float(np.linalg.norm(m - q)) < 0.02 for q in seen):
                     continue
@@ -732,8 +739,7 @@ class AdaptivePlanner:
         passes = []
         for spec in coarse:
             samples = by_spec[spec]
-            coord = samples["drive_u_m"] if spec.axis == "x" else samples["drive_v_m"]
-            lag = self.sensor_hysteresis_m * float(np.median(samples["direction"])) if len(coord) else 0.0
+            coord, lag = self._along(samples, spec.axis)
             fixed = spec.start_uv[1] if spec.axis == "x" else spec.start_uv[0]
             for peak in detect_peaks(coord, samples["inductive"], weak_cfg):
                 if peak.height >= self.peaks.min_height:
