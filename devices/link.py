@@ -1,8 +1,12 @@
-"""Line-framed serial transport over a pyserial URL (a real port, `socket://host:port`, `loop://`).
+"""One connection to a device over a pyserial URL (a real port, `socket://host:port`, `loop://`), framed by the
+protocol's framer.
 
-Framing and recovery: bytes in, lines out, with a deadline on every read, reconnection when the device goes
-away, and `exchange()`, the one retry loop for request/answer protocols. The protocols (GRBL in
-scanner/grbl.py, the wall scanner in scanner/wallscanner.py) sit on top and say only what their lines mean.
+As pyserial's `threaded` module splits a connection from its Packetizer/LineReader, the link here knows bytes,
+deadlines and recovery, and a framer knows how frames sit in the byte stream: `LineFramer` (text lines, GRBL),
+the wall scanner's CRC lines (devices/wallscanner.py) and Pelco-D's 7-byte frames (devices/pelco_d.py). On top,
+`exchange()` is the one retry loop of every request/answer protocol, with a lock held for the whole exchange
+and a deadline on every read; it reconnects a device that went away. The protocols say only what their frames
+mean.
 """
 
 from __future__ import annotations
@@ -10,60 +14,108 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
-from typing import TypeVar
+from dataclasses import dataclass
+from typing import Generic, Protocol, TypeVar
 
 import serial
 
-from geometry.errors import InputError
+from devices.errors import DeviceError, DeviceTimeoutError, DisconnectedError, FrameTimeoutError, RequestDamagedError
 
 POLL_S = 0.01  # granularity of the read deadline
 MAX_LINE_BYTES = 4096  # longer "lines" are garbage: dropped so a device spewing noise cannot exhaust memory
 
-
-class LinkError(InputError):
-    """The device cannot be reached (after reconnect attempts) or keeps failing: a person must look."""
-
-
-class LinkTimeoutError(Exception):
-    """No complete line arrived before the deadline (recoverable: the protocol retries)."""
-
-
-class DisconnectedError(Exception):
-    """The transport went away (recoverable: reconnect, then the protocol resynchronises)."""
-
-
-class DeviceResetError(Exception):
-    """The device was reset or reconnected: state (position, buffers) was lost; redo the current step."""
-
-
-class RequestDamagedError(Exception):
-    """The device says our request arrived damaged: `exchange()` sends it again."""
-
-
+Frame = TypeVar("Frame")
 Answer = TypeVar("Answer")
 
 
-class SerialLink:
-    """A line-oriented connection to one device.
+@dataclass(frozen=True)
+class Noise:
+    """The bytes a wire carries, for the fault injector to imitate: inserted garbage bytes from range
+    [insert[0], insert[1]), junk frames of junk_length[0]..junk_length[1]-1 bytes from [junk[0], junk[1])."""
 
-    url : pyserial URL; timeout_s : default deadline for one response line; reconnect_attempts and
-    reconnect_delay_s bound how long a vanished device is waited for (never a hang).
+    insert: tuple[int, int]
+    junk: tuple[int, int]
+    junk_length: tuple[int, int]
+
+
+# Printable ASCII: inserted bytes without space (a space would split fields); junk lines may hold spaces.
+TEXT_NOISE = Noise(insert=(33, 127), junk=(32, 127), junk_length=(1, 30))
+
+
+class Framer(Protocol[Frame]):
+    """Frames in and out of a byte stream (pyserial's Packetizer, without the thread).
+
+    feed() takes received bytes and returns the complete frames they finish (keeping a partial one for the
+    next call); it never raises: bytes that cannot be a frame are counted in rejected_bytes and dropped.
+    encode() gives a frame's bytes without the terminator, which is sent after it.
     """
 
-    def __init__(self, url: str, name: str = "device", timeout_s: float = 0.5, baudrate: int = 115200,
-                 reconnect_attempts: int = 50, reconnect_delay_s: float = 0.02) -> None:
+    terminator: bytes
+    noise: Noise
+    rejected_bytes: int
+
+    def feed(self, data: bytes) -> list[Frame]: ...
+
+    def encode(self, frame: Frame) -> bytes: ...
+
+    def clear(self) -> None: ...
+
+
+class LineFramer:
+    """Text lines ending in `\\n` (a `\\r` before it is dropped), decoded as ASCII leniently; a "line" longer
+    than max_bytes is garbage and dropped, so a device spewing noise cannot exhaust memory."""
+
+    terminator = b"\n"
+    noise = TEXT_NOISE
+
+    def __init__(self, max_bytes: int = MAX_LINE_BYTES) -> None:
+        self.max_bytes = max_bytes
+        self._buffer = bytearray()
+        self.rejected_bytes = 0
+
+    def feed(self, data: bytes) -> list[str]:
+        self._buffer.extend(data)
+        lines = []
+        while (newline := self._buffer.find(b"\n")) >= 0:
+            lines.append(bytes(self._buffer[:newline]).decode("ascii", errors="replace").strip("\r"))
+            del self._buffer[:newline + 1]
+        if len(self._buffer) > self.max_bytes:
+            self.rejected_bytes += len(self._buffer)
+            self._buffer.clear()
+        return lines
+
+    def encode(self, frame: str) -> bytes:
+        return frame.encode("ascii", errors="replace")
+
+    def clear(self) -> None:
+        self._buffer.clear()
+
+
+class SerialLink(Generic[Frame]):
+    """A framed connection to one device.
+
+    url : pyserial URL; framer : the protocol's framer; timeout_s : default deadline for one answer frame;
+    reconnect_attempts and reconnect_delay_s bound how long a vanished device is waited for (never a hang);
+    hint : what a person should do when the device fails for good (ends every DeviceError of the link).
+    """
+
+    def __init__(self, url: str, framer: Framer[Frame], name: str = "device", timeout_s: float = 0.5,
+                 baudrate: int = 115200, reconnect_attempts: int = 50, reconnect_delay_s: float = 0.02,
+                 hint: str = "check the cable, power and baud rate of the device") -> None:
         self.url = url
+        self.framer = framer
         self.name = name
         self.timeout_s = timeout_s
         self.baudrate = baudrate
         self.reconnect_attempts = reconnect_attempts
         self.reconnect_delay_s = reconnect_delay_s
+        self.hint = hint
         self.lock = threading.RLock()
         self.reconnects = 0  # protocols compare this to notice that the device was reset
         self._port: serial.SerialBase | None = None
-        self._buffer = bytearray()
-        self.garbage_lines = 0
+        self._frames: deque[Frame] = deque()
         self.faults_recovered = 0  # timeouts, resends and reconnects that exchange() got over
 
     # ------------------------------------------------------------------ connection
@@ -72,8 +124,9 @@ class SerialLink:
             self._port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=POLL_S,
                                                write_timeout=self.timeout_s)
         except (serial.SerialException, ValueError, OSError) as err:
-            raise DisconnectedError(f"{self.name} at {self.url}: {err}") from None
-        self._buffer.clear()
+            raise DisconnectedError(f"cannot open the {self.name} at {self.url}: {err}", self.hint) from None
+        self.framer.clear()
+        self._frames.clear()
 
     def close(self) -> None:
         if self._port is not None:
@@ -82,7 +135,7 @@ class SerialLink:
             self._port = None
 
     def reconnect(self) -> None:
-        """Close and reopen with bounded retries; raises LinkError when the device does not come back."""
+        """Close and reopen with bounded retries; raises DeviceError when the device does not come back."""
         self.close()
         last = ""
         for attempt in range(self.reconnect_attempts):
@@ -93,10 +146,10 @@ class SerialLink:
                 return
             except DisconnectedError as err:
                 last = str(err)
-        raise LinkError(f"{self.name} at {self.url} did not come back after {self.reconnect_attempts} attempts "
-                        f"({last})", "check the cable and power of the device, then resume the scan")
+        raise DeviceError(f"{self.name} at {self.url} did not come back after {self.reconnect_attempts} attempts "
+                          f"({last})", self.hint)
 
-    def __enter__(self) -> SerialLink:
+    def __enter__(self) -> SerialLink[Frame]:
         self.open()
         return self
 
@@ -104,86 +157,94 @@ class SerialLink:
         self.close()
 
     # ------------------------------------------------------------------ request / answer
-    def exchange(self, request: Callable[[], str], answer: Callable[[str], Answer | None], *, retries: int,
-                 on_reconnect: Callable[[], Exception], timeout_s: float | None = None) -> Answer:
-        """Send request() and give each line that comes back to answer() until it returns a value.
+    def exchange(self, request: Callable[[], Frame], answer: Callable[[Frame], Answer | None], *, retries: int,
+                 on_reconnect: Callable[[], Exception] | None = None, timeout_s: float | None = None,
+                 try_timeout_s: float | None = None, what: str | None = None) -> Answer:
+        """Send request() and give each frame that comes back to answer() until it returns a value.
 
-        answer returns None to keep listening (noise, a stale line), raises RequestDamagedError when the
+        answer returns None to keep listening (noise, a stale frame), raises RequestDamagedError when the
         device reports the request damaged, and raises the protocol's own errors for what a person must see.
         A timeout or a RequestDamagedError sends a fresh request() again, at most `retries` times more, then
-        LinkError. A disconnect reconnects and raises the error on_reconnect() returns, once the protocol has
-        dropped the state the device lost. Holds the lock for the whole exchange, so no other request's lines
-        are taken for ours.
+        DeviceTimeoutError. timeout_s bounds the wait for each frame, try_timeout_s (if given) a whole try
+        whatever the device sends meanwhile. A disconnect reconnects; then, for a device that lost state the
+        protocol relied on, the error on_reconnect() returns is raised once the protocol has dropped that
+        state, else (on_reconnect None: nothing was lost) the request is tried again. Holds the lock for the
+        whole exchange, so no other request's frames are taken for ours. what names the request in errors
+        (default: the frame's repr).
         """
-        last_fault, line = "", ""
+        last_fault, frame = "", None
+        frame_s = self.timeout_s if timeout_s is None else timeout_s
         with self.lock:
             for _ in range(retries + 1):
                 try:
                     self.drain()
-                    line = request()
-                    self.write_line(line)
-                    while (value := answer(self.read_line(timeout_s))) is None:
-                        pass
-                    return value
-                except (LinkTimeoutError, RequestDamagedError) as fault:
+                    frame = request()
+                    self.send(frame)
+                    try_deadline = None if try_timeout_s is None else time.monotonic() + try_timeout_s
+                    while True:
+                        deadline = time.monotonic() + frame_s
+                        value = answer(self.receive(deadline=deadline if try_deadline is None
+                                                    else min(deadline, try_deadline)))
+                        if value is not None:
+                            return value
+                except (FrameTimeoutError, RequestDamagedError) as fault:
                     self.faults_recovered += 1
                     last_fault = str(fault)
-                except DisconnectedError:
+                except DisconnectedError as fault:
                     self.faults_recovered += 1
+                    last_fault = str(fault)
                     self.reconnect()
-                    raise on_reconnect() from None
-        raise LinkError(f"{self.name} at {self.url}: no valid answer to {line!r} after {retries + 1} tries "
-                        f"(last: {last_fault})",
-                        "check the connection (cable, baud rate, power), then resume")
+                    if on_reconnect is not None:
+                        raise on_reconnect() from None
+        raise DeviceTimeoutError(f"{self.name} at {self.url} did not answer {what or repr(frame)} after {retries + 1} "
+                                 f"tries of {try_timeout_s or frame_s:.2g} s (last: {last_fault})", self.hint)
 
-    # ------------------------------------------------------------------ lines
-    def write_line(self, text: str) -> None:
+    # ------------------------------------------------------------------ frames
+    def send(self, frame: Frame) -> None:
         if self._port is None:
-            raise DisconnectedError(f"{self.name}: not open")
+            raise DisconnectedError(f"{self.name} at {self.url}: not open")
         try:
-            self._port.write(text.encode("ascii", errors="replace") + b"\n")
+            self._port.write(self.framer.encode(frame) + self.framer.terminator)
         except (serial.SerialException, OSError) as err:
-            raise DisconnectedError(f"{self.name}: write failed ({err})") from None
+            raise DisconnectedError(f"{self.name} at {self.url}: write failed ({err})") from None
 
-    def read_line(self, timeout_s: float | None = None) -> str:
-        """The next complete line (without newline), decoded leniently. Raises LinkTimeoutError / DisconnectedError."""
-        deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
+    def receive(self, timeout_s: float | None = None, *, deadline: float | None = None) -> Frame:
+        """The next complete frame. Waits until `deadline` (time.monotonic()), else timeout_s (default: the
+        link's), from now. Raises FrameTimeoutError / DisconnectedError."""
+        start = time.monotonic()
+        if deadline is None:
+            deadline = start + (self.timeout_s if timeout_s is None else timeout_s)
         while True:
-            newline = self._buffer.find(b"\n")
-            if newline >= 0:
-                raw = bytes(self._buffer[:newline])
-                del self._buffer[:newline + 1]
-                return raw.decode("ascii", errors="replace").strip("\r")
-            if len(self._buffer) > MAX_LINE_BYTES:
-                self._buffer.clear()
-                self.garbage_lines += 1
+            if self._frames:
+                return self._frames.popleft()
             if time.monotonic() >= deadline:
-                raise LinkTimeoutError(f"{self.name}: no response within {timeout_s or self.timeout_s:.3g} s")
-            if self._port is None:
-                raise DisconnectedError(f"{self.name}: not open")
-            try:
-                chunk = self._port.read(1)  # waits up to the port's 10 ms timeout
-                if chunk:  # then take everything already there without waiting (socket:// in_waiting is 0/1)
-                    self._port.timeout = 0
-                    chunk += self._port.read(65536)
-                    self._port.timeout = POLL_S
-            except (serial.SerialException, OSError) as err:
-                raise DisconnectedError(f"{self.name}: read failed ({err})") from None
-            if chunk:
-                self._buffer.extend(chunk)
+                raise FrameTimeoutError(f"{self.name} at {self.url}: no answer within {deadline - start:.3g} s")
+            self._frames.extend(self.framer.feed(self._read()))
 
-    def drain(self) -> list[str]:
-        """Discard (and return) whatever complete lines are already waiting: stale responses after a retry."""
-        lines = []
+    def drain(self) -> list[Frame]:
+        """Discard (and return) whatever complete frames are already waiting: stale answers after a retry."""
         if self._port is None:
-            return lines
+            return []
         try:
             self._port.timeout = 0
-            self._buffer.extend(self._port.read(65536))
+            self._frames.extend(self.framer.feed(self._port.read(65536)))
             self._port.timeout = POLL_S
         except (serial.SerialException, OSError) as err:
-            raise DisconnectedError(f"{self.name}: read failed ({err})") from None
-        while (newline := self._buffer.find(b"\n")) >= 0:
-            lines.append(bytes(self._buffer[:newline]).decode("ascii", errors="replace"))
-            del self._buffer[:newline + 1]
-        return lines
+            raise DisconnectedError(f"{self.name} at {self.url}: read failed ({err})") from None
+        stale = list(self._frames)
+        self._frames.clear()
+        return stale
+
+    def _read(self) -> bytes:
+        """What arrives within one poll interval (possibly nothing)."""
+        if self._port is None:
+            raise DisconnectedError(f"{self.name} at {self.url}: not open")
+        try:
+            chunk = self._port.read(1)  # waits up to the port's 10 ms timeout
+            if chunk:  # then take everything already there without waiting (socket:// in_waiting is 0/1)
+                self._port.timeout = 0
+                chunk += self._port.read(65536)
+                self._port.timeout = POLL_S
+        except (serial.SerialException, OSError) as err:
+            raise DisconnectedError(f"{self.name} at {self.url}: read failed ({err})") from None
+        return chunk
