@@ -145,11 +145,12 @@ class DemoContext:
         """The projection session with the rig (calibrated, or the design values after the calibrated one
         failed: figures["wall pose"]["rig used"]) and the map, its head aimed at the aim point."""
         if self._session is None:
-            from arproj.devices import HeadSimulator, PanTiltHead
             from arproj.session.output import MemoryOutput
             from arproj.session.robot_io import SimulatedRobot
             from arproj.session.session import ProjectionSession
             from arproj.session.wallmap import load_wall_map
+            from devices.pelco_d import PanTiltHead
+            from devices.sim import HeadSimulator
             from geometry.rig import Rig
 
             site = self.site()
@@ -179,13 +180,13 @@ class DemoContext:
 # -- stages ---------------------------------------------------------------------------------------------------
 def stage_scan(ctx: DemoContext) -> None:
     """Adaptive scan of the wall through the serial device simulators (--quick: in-process), with progress."""
-    from scanner.devices import simulated_devices
+    from devices.sim import FaultConfig
     from scanner.figures import plot_log
+    from scanner.hardware import simulated_devices
     from scanner.log import ScanLog
     from scanner.plan import DriveConfig, make_planner
     from scanner.run import DirectBackend, open_for_resume, run_scan, scan_meta, simulated_site
     from scanner.sensor_model import SensorConfig
-    from scanner.sim.devices import FaultConfig
 
     log_path = ctx.out / "scan.db"
     sensor, drives = SensorConfig(), DriveConfig()

@@ -2,7 +2,7 @@
 
 A backend measures one pass: `measure_pass(pass_id, spec) -> (t_rel (n,) s, uv (n, 2) m, counts (n, 3) int)`
 plus `place_robot(report)` when the robot reached a frame. `DirectBackend` computes it in-process from the
-simulated site; `scanner.devices.DeviceBackend` drives the GRBL drives and the wall scanner over serial URLs
+simulated site; `scanner.hardware.DeviceBackend` drives the GRBL drives and the wall scanner over serial URLs
 (real hardware or the simulators in scanner/sim). Both give identical samples in simulation.
 
 Resume: the planners are deterministic functions of the samples they have seen, so a resumed scan replays

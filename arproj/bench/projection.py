@@ -119,7 +119,6 @@ def _homography(T_wall_from_projector: np.ndarray, intr: object, raster: object)
 
 
 def run(quick: bool = False, seed: int = 0) -> BenchTable:
-    from arproj.devices import HeadSimulator, PanTiltHead
     from arproj.gl import create_context
     from arproj.session.evaluate import true_landing_errors
     from arproj.session.output import MemoryOutput
@@ -127,6 +126,8 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
     from arproj.session.session import ProjectionSession
     from arproj.session.wallmap import wall_map_from_wall
     from arproj.sim.site import Site
+    from devices.pelco_d import PanTiltHead
+    from devices.sim import HeadSimulator
     from scanner.wall import random_wall
 
     notes: list[str] = []

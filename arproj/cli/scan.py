@@ -45,7 +45,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     ) -> None:
         """Scan a wall: frames, passes and every sample go to a SQLite log, batch by batch (kill -9 safe)."""
         from arproj.console import console, progress_bar
-        from scanner.devices import simulated_devices
+        from devices.sim import FaultConfig
+        from scanner.hardware import simulated_devices
         from scanner.log import ScanLog
         from scanner.plan import DriveConfig
         from scanner.run import (
@@ -57,7 +58,6 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             simulated_site,
         )
         from scanner.sensor_model import SensorConfig
-        from scanner.sim.devices import FaultConfig
         from scanner.wall import load_wall
 
         if not 0.0 <= faults <= 0.5:
@@ -80,7 +80,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                 raise InputError("arproj scan needs --wall FILE and --log LOG (or --resume LOG)")
             if not sim:
                 raise InputError("only the simulated site can be scanned from this command: add --sim",
-                                 "real devices are driven by scanner.devices.DeviceBackend with their serial URLs")
+                                 "real devices are driven by scanner.hardware.DeviceBackend with their serial URLs")
             if plan not in ("dense", "adaptive"):
                 raise InputError(f"--plan = {plan!r}: use dense or adaptive")
             from scanner.wall import shipped_walls

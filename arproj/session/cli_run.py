@@ -10,9 +10,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from arproj.devices import DeviceError, HeadFaults, HeadSimulator, PanTiltHead
 from arproj.session.output import BeamerWindow, FileOutput, MemoryOutput
 from arproj.session.wallmap import WallMap, load_wall_map, wall_map_from_wall_file
+from devices.errors import DeviceError
+from devices.pelco_d import PanTiltHead
+from devices.sim import HeadFaults, HeadSimulator
 from geometry.errors import InputError
 from geometry.rig import Rig
 

@@ -16,8 +16,9 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from arproj.devices import HeadSimulator, PanTiltHead
 from arproj.session.output import FrameOutput
+from devices.pelco_d import PanTiltHead
+from devices.sim import HeadSimulator
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert

@@ -21,7 +21,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
-from arproj.devices import DeviceError
 from arproj.session import gate, overlays, registration
 from arproj.session import tolerances as tol
 from arproj.session.projection import MapProjector
@@ -32,6 +31,7 @@ from arproj.wallpose.estimate import PlaneEstimate, Uncertainty, estimate_plane
 from arproj.wallpose.pattern import choose_pattern
 from arproj.wallpose.pose import estimate_wall_pose
 from arproj.wallpose.rig import ViewRig
+from devices.errors import DeviceError
 from geometry.errors import InputError
 from geometry.poses import invert, make_pose, transform_points
 from geometry.rig import Rig

@@ -4,12 +4,13 @@ then the faults the safety gate exists for (head slip, robot nudged, head gone).
 import numpy as np
 import pytest
 
-from arproj.devices import HeadSimulator, PanTiltHead
 from arproj.session.evaluate import true_landing_errors
 from arproj.session.output import MemoryOutput
 from arproj.session.robot_io import SimulatedRobot, nominal_rig
 from arproj.session.session import ProjectionSession
 from arproj.session.wallmap import wall_map_from_wall_file
+from devices.pelco_d import PanTiltHead
+from devices.sim import HeadSimulator
 from geometry.poses import make_pose, rotation_about
 from scanner.wall import shipped_walls
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from arproj.devices import pelco_d
+from devices import pelco_d
 
 
 def test_frame_layout_and_checksum_match_the_protocol():
@@ -25,7 +25,7 @@ def test_decoder_resynchronises_and_rejects_corrupted_frames():
     bad[6] ^= 0x01
     stream = bytes(rng.integers(0, 256, 5, dtype=np.uint8)) + good[0] + bytes(bad) + good[1] + b"\xff\xff" \
         + good[2] + good[3][:3]
-    decoder = pelco_d.FrameDecoder()
+    decoder = pelco_d.PelcoDFramer()
     frames = decoder.feed(stream[:9]) + decoder.feed(stream[9:])
     frames += decoder.feed(good[3][3:])
     assert [f.data for f in frames] == [0, 0xFFFF, 0x00FF, 12345]

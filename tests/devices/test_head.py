@@ -2,7 +2,9 @@
 
 import pytest
 
-from arproj.devices import DeviceError, DeviceTimeoutError, HeadFaults, HeadSimulator, PanTiltHead
+from devices.errors import DeviceError, DeviceTimeoutError
+from devices.pelco_d import PanTiltHead
+from devices.sim import HeadFaults, HeadSimulator
 
 # Half the Pelco-D 0.01° step, plus float round-off: the simulator settles on the commanded step.
 STEP_DEG = 0.006

@@ -1,10 +1,11 @@
-"""SerialLink.exchange: the one retry loop under the GRBL and wall-scanner protocols (loop:// echoes requests)."""
+"""SerialLink.exchange: the one retry loop under every protocol (loop:// echoes requests)."""
 
 from __future__ import annotations
 
 import pytest
 
-from scanner.serial_link import DeviceResetError, LinkError, RequestDamagedError, SerialLink
+from devices.errors import DeviceResetError, DeviceTimeoutError, FrameTimeoutError, RequestDamagedError
+from devices.link import LineFramer, SerialLink
 
 
 def _never_reconnects() -> Exception:
@@ -13,7 +14,7 @@ def _never_reconnects() -> Exception:
 
 def test_the_answer_ends_the_exchange_and_noise_before_it_is_skipped() -> None:
     sent = iter(["noise", "PING"])
-    with SerialLink("loop://", "echo", timeout_s=0.2) as link:
+    with SerialLink("loop://", LineFramer(), "echo", timeout_s=0.2) as link:
         heard = []
 
         def answer(line: str) -> str | None:
@@ -33,21 +34,21 @@ def test_a_request_the_device_keeps_calling_damaged_fails_after_the_retries_nami
         tries.append(line)
         raise RequestDamagedError(f"{line} arrived damaged")
 
-    with SerialLink("loop://", "echo", timeout_s=0.2) as link:
-        with pytest.raises(LinkError, match=r"no valid answer to 'G0 X1' after 3 tries.*arrived damaged"):
+    with SerialLink("loop://", LineFramer(), "echo", timeout_s=0.2) as link:
+        with pytest.raises(DeviceTimeoutError, match=r"did not answer 'G0 X1' after 3 tries.*arrived damaged"):
             link.exchange(lambda: "G0 X1", damaged, retries=2, on_reconnect=_never_reconnects)
         assert tries == ["G0 X1"] * 3 and link.faults_recovered == 3
 
 
 def test_a_device_that_stays_silent_times_out_every_try() -> None:
-    with SerialLink("loop://", "echo", timeout_s=0.02) as link:
-        with pytest.raises(LinkError, match="after 2 tries"):
+    with SerialLink("loop://", LineFramer(), "echo", timeout_s=0.02) as link:
+        with pytest.raises(DeviceTimeoutError, match="after 2 tries"):
             link.exchange(lambda: "?", lambda line: None, retries=1, on_reconnect=_never_reconnects)
         assert link.faults_recovered == 2
 
 
 def test_a_vanished_device_is_reopened_and_the_protocol_told_to_redo_its_step() -> None:
-    link = SerialLink("loop://", "echo", timeout_s=0.2)
+    link = SerialLink("loop://", LineFramer(), "echo", timeout_s=0.2)
     link.open()
     link._port.close()  # the device went away under us
     told = []
@@ -61,3 +62,11 @@ def test_a_vanished_device_is_reopened_and_the_protocol_told_to_redo_its_step() 
     assert told == [1] and link.faults_recovered == 1
     assert link.exchange(lambda: "ID?", lambda line: line, retries=3, on_reconnect=reconnected) == "ID?"
     link.close()
+
+
+def test_links_work_over_any_pyserial_url():
+    with SerialLink("loop://", LineFramer(), "echo", timeout_s=0.2) as link:
+        link.send("#1 ID?*00000000")
+        assert link.receive() == "#1 ID?*00000000"
+        with pytest.raises(FrameTimeoutError):
+            link.receive(0.05)

@@ -1,4 +1,5 @@
-"""The wall scanner's line protocol (ours, documented here; the simulator in scanner/sim/devices.py speaks it).
+"""The wall scanner's line protocol (ours, documented here; the simulator in scanner/sim/devices.py speaks it):
+its framing (`CrcLineFramer`) and the host's driver (`WallScanner`).
 
 Every line in both directions ends with `*CCCCCCCC`: the CRC-32 (zlib/IEEE) of all bytes before the `*`, eight
 upper-case hex digits (an NMEA-style XOR byte lets ~1/256 damaged lines through, and insertions of equal byte
@@ -28,11 +29,12 @@ the device's own statement and is reported, not retried away.
 from __future__ import annotations
 
 import zlib
+from dataclasses import dataclass
 
 import numpy as np
 
-from geometry.errors import InputError
-from scanner.serial_link import DeviceResetError, LinkError, RequestDamagedError, SerialLink
+from devices.errors import DeviceError, DeviceRefusedError, DeviceResetError, RequestDamagedError
+from devices.link import LineFramer, SerialLink
 
 GET_CHUNK = 200
 COUNTS_MAX = 1000
@@ -55,14 +57,46 @@ def unframe_line(line: str) -> str | None:
     return body if line[star + 1:].upper() == checksum(body) else None
 
 
-class ScannerError(InputError):
+@dataclass(frozen=True)
+class Damaged:
+    """A line whose checksum is wrong (garbled, truncated, noise), as it arrived: a device answers it with
+    ERR 2 under the id it seems to carry, the host skips it."""
+
+    text: str
+
+
+class CrcLineFramer:
+    """Text lines that end in `*CCCCCCCC`: feed() gives the body of every sound line and Damaged for the rest;
+    encode() appends the checksum to a body."""
+
+    terminator = LineFramer.terminator
+    noise = LineFramer.noise
+
+    def __init__(self) -> None:
+        self._lines = LineFramer()
+
+    @property
+    def rejected_bytes(self) -> int:
+        return self._lines.rejected_bytes
+
+    def feed(self, data: bytes) -> list[str | Damaged]:
+        return [Damaged(line) if (body := unframe_line(line)) is None else body for line in self._lines.feed(data)]
+
+    def encode(self, frame: str) -> bytes:
+        return self._lines.encode(frame_line(frame))
+
+    def clear(self) -> None:
+        self._lines.clear()
+
+
+class ScannerError(DeviceRefusedError):
     """The wall scanner refused a request or reported impossible values."""
 
 
 class WallScanner:
-    """Client of the wall scanner over a SerialLink."""
+    """Client of the wall scanner over a SerialLink framed by CrcLineFramer."""
 
-    def __init__(self, link: SerialLink, retries: int = 8) -> None:
+    def __init__(self, link: SerialLink[str | Damaged], retries: int = 8) -> None:
         self.link = link
         self.retries = retries
         self._next_id = 1
@@ -93,11 +127,10 @@ class WallScanner:
             nonlocal tag
             tag = f"#{self._new_id()}"  # a fresh id per try: a late answer to an earlier try is ignored
             lines.clear()
-            return frame_line(f"{tag} {command}")
+            return f"{tag} {command}"
 
-        def answer(line: str) -> list[list[str]] | None:
-            body = unframe_line(line)
-            fields = body.split() if body is not None else []
+        def answer(line: str | Damaged) -> list[list[str]] | None:
+            fields = line.split() if isinstance(line, str) else []
             if len(fields) < 2 or fields[0] != tag:
                 self._protocol_faults += 1  # bad checksum, stale answer or noise
                 return None
@@ -173,5 +206,5 @@ class WallScanner:
                 have[k] = True
             if int(have.sum()) == before:
                 failures += 1
-        raise LinkError(f"scanner at {self.link.url}: samples {np.flatnonzero(~have)[:5].tolist()}… could not be "
+        raise DeviceError(f"scanner at {self.link.url}: samples {np.flatnonzero(~have)[:5].tolist()}… could not be "
                         "read", "check the connection and resume")

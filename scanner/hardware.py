@@ -1,4 +1,4 @@
-"""Scanning with the real device stack: GRBL drives and the wall scanner over serial URLs.
+"""Scanning with the real device stack (devices/): GRBL drives and the wall scanner over serial URLs.
 
 `DeviceBackend.measure_pass` runs one pass as a real scan does: home if needed, rapid to the pass start, arm
 the scanner (its clock stamps sample 0 at the start of the measuring move), feed move at scan speed, wait until
@@ -6,7 +6,7 @@ the drives report Idle at the end, disarm, read the buffer back (missing samples
 device times into drive positions with the same trapezoidal profile GRBL runs. Whatever goes wrong on the way
 (garbage, truncated lines, timeouts, a device that disappears and comes back) is retried; a pass interrupted by
 a device reset is measured again from its start, so no sample is lost or duplicated; after `max_pass_attempts`
-the scan stops with a clear message (LinkError) and can be resumed from its log.
+the scan stops with a clear message (DeviceError) and can be resumed from its log.
 
 `simulated_devices(world, faults)` starts the GRBL and wall-scanner simulators on 127.0.0.1 and yields a
 backend connected to them through `socket://` URLs — the same code path as hardware.
@@ -19,13 +19,17 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from scanner.grbl import GrblDrives
+from devices.errors import DeviceError, DeviceResetError, DisconnectedError
+from devices.grbl import GrblDrives
+from devices.link import LineFramer, SerialLink
+from devices.sim import DeviceServer, FaultConfig
+from devices.wallscanner import CrcLineFramer, WallScanner
 from scanner.plan import DriveConfig, PassSpec, move_position, move_time
 from scanner.sensor_model import SensorConfig
-from scanner.serial_link import DeviceResetError, DisconnectedError, LinkError, SerialLink
-from scanner.sim.devices import DeviceServer, FaultConfig, GrblSim, WallScannerSim
+from scanner.sim.devices import GRBL_STREAM, SCANNER_STREAM, GrblSim, WallScannerSim
 from scanner.sim.world import FrameReport, SimWorld
-from scanner.wallscanner import WallScanner
+
+HINT = "check the cable and power of the device, then resume the scan from its log"
 
 
 class DeviceBackend:
@@ -37,8 +41,8 @@ class DeviceBackend:
         self.drives_cfg = drives
         self.sensor_cfg = sensor
         self.max_pass_attempts = max_pass_attempts
-        self.drive_link = SerialLink(drives_url, "drives", timeout_s=timeout_s)
-        self.scanner_link = SerialLink(scanner_url, "scanner", timeout_s=timeout_s)
+        self.drive_link = SerialLink(drives_url, LineFramer(), "drives", timeout_s=timeout_s, hint=HINT)
+        self.scanner_link = SerialLink(scanner_url, CrcLineFramer(), "scanner", timeout_s=timeout_s, hint=HINT)
         # Real drives take the motion's time to answer G4/$H; simulated ones answer at once (virtual clock).
         self.realtime = realtime
         self.grbl = GrblDrives(self.drive_link, homing_timeout_s=60.0 if realtime else timeout_s)
@@ -98,7 +102,7 @@ class DeviceBackend:
             except DeviceResetError as reset:
                 self.pass_restarts += 1
                 last_error = str(reset)
-        raise LinkError(f"pass {pass_id} failed {self.max_pass_attempts} times (last: {last_error})",
+        raise DeviceError(f"pass {pass_id} failed {self.max_pass_attempts} times (last: {last_error})",
                         "the devices keep resetting: check power and cables, then resume the scan from its log")
 
     def close(self) -> None:
@@ -110,8 +114,8 @@ class DeviceBackend:
 def simulated_devices(world: SimWorld, faults: FaultConfig | None = None, timeout_s: float = 0.5,
                       max_pass_attempts: int = 12) -> Iterator[tuple[DeviceBackend, DeviceServer, DeviceServer]]:
     """Start both device simulators and connect a DeviceBackend to them (socket:// URLs on 127.0.0.1)."""
-    grbl_server = DeviceServer(GrblSim(world), faults, stream=1)
-    scanner_server = DeviceServer(WallScannerSim(world), faults, stream=2)
+    grbl_server = DeviceServer(GrblSim(world), faults, stream=GRBL_STREAM)
+    scanner_server = DeviceServer(WallScannerSim(world), faults, stream=SCANNER_STREAM)
     grbl_server.start()
     scanner_server.start()
     assert world is not None

@@ -3,7 +3,8 @@
 Used subset: `$H` homing, `G21 G90` (millimetres, absolute), `G0 X Y` rapid, `G1 X Y F` feed move (mm/min),
 `G4 P0` (its `ok` comes once all queued motion has finished), `?` real-time status report
 `<Idle|MPos:x,y,z|FS:f,s>`, replies `ok` / `error:N`, alarms `ALARM:N`, the reset banner `Grbl 1.1h ['$' for
-help]`. Drive axis X is the scanner's u, Y its v (metres in Python, millimetres on the wire).
+help]`. Drive axis X is the scanner's u, Y its v (metres in Python, millimetres on the wire). Framing: plain
+text lines (`devices.link.LineFramer`).
 
 Robustness: only absolute moves are sent, so a command whose `ok` was lost can be repeated safely; every
 exchange has a deadline; garbage lines are skipped; after a reconnect (GRBL resets when its port reopens)
@@ -15,8 +16,9 @@ from __future__ import annotations
 
 import re
 
+from devices.errors import DeviceError, DeviceRefusedError, DeviceResetError, RequestDamagedError
+from devices.link import SerialLink
 from geometry.errors import InputError
-from scanner.serial_link import DeviceResetError, LinkError, RequestDamagedError, SerialLink
 
 POSITION_TOLERANCE_MM = 0.002
 STATUS_RE = re.compile(r"^<(\w+)(?::\d+)?\|MPos:(-?\d+\.\d+),(-?\d+\.\d+),(-?\d+\.\d+)(?:\|.*)?>$")
@@ -30,14 +32,14 @@ ALARM_CODES = {1: "hard limit", 2: "soft limit: target exceeds machine travel", 
                8: "homing fail: pull-off", 9: "homing fail: limit switch not found"}
 
 
-class GrblError(InputError):
+class GrblError(DeviceRefusedError):
     """GRBL refused a command (error:N) or raised an alarm (ALARM:N)."""
 
 
 class GrblDrives:
     """Client of a GRBL controller driving the scanner's two linear axes."""
 
-    def __init__(self, link: SerialLink, max_feed_mm_min: float = 15000.0, retries: int = 8,
+    def __init__(self, link: SerialLink[str], max_feed_mm_min: float = 15000.0, retries: int = 8,
                  homing_timeout_s: float = 60.0) -> None:
         self.link = link
         self.homing_timeout_s = homing_timeout_s
@@ -141,7 +143,7 @@ class GrblDrives:
             if state == "Idle":  # the move was lost (e.g. an ok taken for another's): redo the step
                 self._protocol_faults += 1
                 raise DeviceResetError("drives idle away from the target")
-        raise LinkError(f"drives at {self.link.url} did not reach u={u_m:.4f} v={v_m:.4f} m",
+        raise DeviceError(f"drives at {self.link.url} did not reach u={u_m:.4f} v={v_m:.4f} m",
                         "check the drives for blocked axes or lost steps")
 
 

@@ -1,0 +1,140 @@
+"""The one simulator server: a simulated device served as a `socket://127.0.0.1:PORT` serial URL.
+
+A TCP server thread on loopback, one connection at a time, that frames what arrives with the device's framer,
+hands each frame to the device and sends its answers, every frame through the fault injector
+(devices/sim/faults.py). The host code opens the URL as it would a real port, so simulation and hardware share
+one code path. A device is a `SimDevice`: its framer, a greeting on connect, a reset on (re)connect, and one
+list of answers per frame.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from devices.link import Framer
+from devices.sim.faults import FaultConfig, FaultInjector
+
+
+class SimDevice:
+    """What a DeviceServer serves. Subclasses set `name` and `framer` and implement handle()."""
+
+    name = "device"
+    framer: Callable[[], Framer[Any]]  # a fresh framer per connection
+
+    def greeting(self) -> list[Any]:
+        """Frames sent when a host connects (GRBL's banner), without faults."""
+        return []
+
+    def reset(self) -> None:
+        """The device restarts: a host (re)connected. Devices that keep their state across a reconnect do
+        nothing."""
+
+    def answers(self, frame: Any) -> bool:
+        """Whether the device answers this frame; one it obeys silently (a set command) may be ignored by the
+        fault injector, since only the device's behaviour shows that it was lost."""
+        return True
+
+    def handle(self, frame: Any) -> list[Any]:
+        """The answer frames to one received frame (none: nothing is sent)."""
+        raise NotImplementedError
+
+
+class DeviceServer(threading.Thread):
+    """A TCP server on 127.0.0.1 for one simulated device, one connection at a time."""
+
+    def __init__(self, device: SimDevice, faults: FaultConfig | None = None, stream: int = 0) -> None:
+        super().__init__(daemon=True, name=f"sim-{device.name}")
+        self.device = device
+        self.faults = FaultInjector(faults or FaultConfig(), stream)
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.listener.settimeout(0.05)
+        self.port = self.listener.getsockname()[1]
+        self.stopping = threading.Event()
+        self.down_until = 0.0
+        self.connections = 0
+        self._conn: socket.socket | None = None
+
+    @property
+    def url(self) -> str:
+        return f"socket://127.0.0.1:{self.port}"
+
+    def stop(self) -> None:
+        self.stopping.set()
+        self.join(timeout=2.0)
+        self.listener.close()
+
+    def drop_connection(self) -> None:
+        """The device vanishes for a moment (power blip, cable): the open connection is closed; the port stays
+        reachable, so a host that reconnects gets it back."""
+        conn = self._conn
+        if conn is not None:
+            with contextlib.suppress(OSError):
+                conn.shutdown(socket.SHUT_RDWR)
+
+    def __enter__(self) -> DeviceServer:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def run(self) -> None:
+        while not self.stopping.is_set():
+            try:
+                conn, _ = self.listener.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            if time.monotonic() < self.down_until:
+                conn.close()  # the device is gone for now
+                continue
+            self.connections += 1
+            self.device.reset()
+            with conn:
+                self._conn = conn
+                try:
+                    self._serve(conn)
+                finally:
+                    self._conn = None
+
+    def _serve(self, conn: socket.socket) -> None:
+        conn.settimeout(0.05)
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        framer = self.device.framer()
+        greeting = self.device.greeting()
+        if greeting:
+            conn.sendall(b"".join(framer.encode(frame) + framer.terminator for frame in greeting))
+        while not self.stopping.is_set():
+            try:
+                chunk = conn.recv(65536)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            if not chunk:
+                return
+            for frame in framer.feed(chunk):
+                if not self.device.answers(frame) and self.faults.ignores():
+                    continue
+                out = bytearray()
+                for index, answer in enumerate(self.device.handle(frame)):
+                    fault = self.faults.pick(allow_disconnect=index == 0)
+                    if fault == "disconnect":
+                        self.down_until = time.monotonic() + self.faults.config.down_s
+                        if out:
+                            conn.sendall(bytes(out))
+                        conn.shutdown(socket.SHUT_RDWR)
+                        return
+                    out += self.faults.apply(fault, framer.encode(answer), framer.noise, framer.terminator)
+                if out and self.faults.config.delay_s > 0:
+                    time.sleep(self.faults.config.delay_s)
+                try:
+                    conn.sendall(bytes(out))
+                except OSError:
+                    return
