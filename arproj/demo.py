@@ -19,7 +19,6 @@ reason; the stages that do not depend on it still run, and the report says plain
 from __future__ import annotations
 
 import contextlib
-import itertools
 import json
 import sys
 import time
@@ -35,6 +34,7 @@ import numpy as np
 
 from arproj.console import console, err_console, progress_bar
 from geometry.errors import InputError
+from geometry.plain import plain
 from geometry.poses import invert, look_at, rotation_angle_deg, transform_points
 
 STATE_FILE = "demo-state.json"
@@ -56,8 +56,6 @@ RANGE_BLOCK_PX = 4             # range images are reduced to the median of 4 × 
 RANGE_VIEW_OVERLAP = 0.2       # views overlap by this fraction, so the merged mesh has no gaps
 CALIBRATED_RIG = "calibrated (rig/)"
 DESIGN_RIG = "design values (uncalibrated)"
-FEATURE_STEP_M = 0.05          # registration error: map points every 5 cm along the mapped objects
-FEATURE_MARGIN = 0.05          # … inside the inner 90 % of the beamer image
 TRUTH_STEP_M = 0.01            # truth polylines drawn into the photograph at 1 cm steps
 
 
@@ -149,8 +147,6 @@ class DemoContext:
             from arproj.session.robot_io import SimulatedRobot
             from arproj.session.session import ProjectionSession
             from arproj.session.wallmap import load_wall_map
-            from devices.pelco_d import PanTiltHead
-            from devices.sim import HeadSimulator
             from geometry.rig import Rig
 
             site = self.site()
@@ -161,10 +157,7 @@ class DemoContext:
             else:
                 rig = Rig.load(self.out / "rig")
             wall_map = load_wall_map(self.out / "map" / "wall.glb")
-            head_sim = HeadSimulator(seed=self.options.seed,
-                                     initial_deg=tuple(float(a) for a in site.head_angles_cmd_deg[:2]))
-            head = PanTiltHead(head_sim.url, timeout_s=0.2, retries=3, settle_timeout_s=3.0)
-            self._robot = SimulatedRobot(site, 0, head_sim, head, MemoryOutput())
+            self._robot = SimulatedRobot.on_site(site, 0, MemoryOutput(), seed=self.options.seed)
             self._session = ProjectionSession(rig, wall_map, self._robot)
             self._session.aim_at(self.aim_point())
         return self._session
@@ -180,26 +173,18 @@ class DemoContext:
 # -- stages ---------------------------------------------------------------------------------------------------
 def stage_scan(ctx: DemoContext) -> None:
     """Adaptive scan of the wall through the serial device simulators (--quick: in-process), with progress."""
-    from devices.sim import FaultConfig
+    from arproj.run.scan import ScanSettings, new_scan_log, scan_simulated
     from scanner.figures import plot_log
-    from scanner.hardware import simulated_devices
-    from scanner.log import ScanLog
-    from scanner.plan import DriveConfig, make_planner
-    from scanner.run import DirectBackend, open_for_resume, run_scan, scan_meta, simulated_site
-    from scanner.sensor_model import SensorConfig
+    from scanner.run import open_for_resume
 
     log_path = ctx.out / "scan.db"
-    sensor, drives = SensorConfig(), DriveConfig()
-    plan_options = None
     if ctx.options.resume and log_path.exists():  # an interrupted scan continues where it stopped
         scan_log, _ = open_for_resume(log_path, ctx.wall_path)
-        plan_options = scan_log.meta["plan"]
+        settings = ScanSettings.from_log(scan_log.meta, log_path)
     else:
-        planner = make_planner("adaptive", ctx.wall, drives, sensor.hysteresis_m)
-        planner.frames()  # reach check before the log is created
-        scan_log = ScanLog.create(log_path, scan_meta(ctx.wall, str(ctx.wall_path), planner.describe(), sensor,
-                                                      drives, ctx.options.seed, simulated=True), overwrite=True)
-    world, robot = simulated_site(ctx.wall, sensor, drives, ctx.options.seed)
+        settings = ScanSettings(plan="adaptive", seed=ctx.options.seed)
+        scan_log = new_scan_log(log_path, ctx.wall, str(ctx.wall_path), settings, overwrite=True)
+    settings.serial = not ctx.options.quick
     try:
         with progress_bar() as bar:
             task = bar.add_task("scanning", total=1.0)
@@ -208,17 +193,11 @@ def stage_scan(ctx: DemoContext) -> None:
                 bar.update(task, completed=t, total=total,
                            description=f"scan: {passes} passes, {t / 60:.1f}/~{total / 60:.1f} min simulated")
 
-            kwargs = dict(plan_kind="adaptive", plan_options=plan_options, sensor=sensor, drives=drives,
-                          log=scan_log, progress=progress)
-            if ctx.options.quick:
-                result = run_scan(ctx.wall, DirectBackend(world), robot, **kwargs)
-                backend_name = "in-process site (--quick)"
-            else:
-                with simulated_devices(world, FaultConfig(rate=0.0, seed=ctx.options.seed)) as (backend, _, _):
-                    result = run_scan(ctx.wall, backend, robot, **kwargs)
-                backend_name = "GRBL drives + wall scanner simulators over serial (socket://)"
+            result = scan_simulated(ctx.wall, settings, scan_log, progress).result
     finally:
         scan_log.close()
+    backend_name = ("GRBL drives + wall scanner simulators over serial (socket://)" if settings.serial
+                    else "in-process site (--quick)")
     plot_log(log_path, ctx.out / "scan_readings.png")
     ctx.picture("scan_readings.png", "Raw inductive and AC readings where the scanner took them (adaptive plan: "
                 "a coarse grid, then passes that confirm and trace what it found); the wall file's truth dashed.",
@@ -455,8 +434,7 @@ def stage_wall_pose(ctx: DemoContext) -> None:
 
 def stage_prewarp(ctx: DemoContext) -> None:
     """The session's frame: the map pre-warped for the beamer (closed loop, safety gate); its true error."""
-    from arproj.session import registration
-    from arproj.session.evaluate import true_landing_errors
+    from arproj.session.evaluate import map_features, true_landing_errors
 
     session = ctx.session()
     decision = session.update()
@@ -471,7 +449,7 @@ def stage_prewarp(ctx: DemoContext) -> None:
             measured = np.linalg.norm(reg.loop.errors_xy - reg.correction_xy, axis=1)
             figures["closed loop: marks seen"] = int(reg.loop.seen.sum())
             figures["closed loop: measured error mean mm"] = float(1000 * measured.mean())
-        features = _map_features(session.wall_map, reg.T_wall_from_projector, session.projector_intr, registration)
+        features = map_features(session.wall_map, reg.T_wall_from_projector, session.projector_intr)
         if len(features):
             errors, _ = true_landing_errors(session, ctx.site(), features, 0)
             if len(errors):
@@ -526,19 +504,6 @@ STAGES: list[tuple[str, Callable[[DemoContext], None], tuple[str, ...]]] = [
 
 
 # -- running --------------------------------------------------------------------------------------------------
-def resolve_wall(wall: str | Path) -> tuple[Any, Path]:
-    """The wall file (or a shipped wall's name) loaded and checked; InputError names what is wrong."""
-    from scanner.wall import load_wall, shipped_walls
-
-    path = Path(wall)
-    if not path.exists() and path.parent == Path() and path.stem in shipped_walls():
-        path = shipped_walls()[path.stem]
-    if not path.exists():
-        raise InputError(f"--wall {wall}: no such file",
-                         f"pass a wall file (YAML) or a shipped wall: {', '.join(sorted(shipped_walls()))}")
-    return load_wall(path), path.resolve()
-
-
 def _check_writable(out: Path) -> None:
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -578,7 +543,7 @@ def _save_state(ctx: DemoContext) -> None:
              "stages": {n: {"seconds": r.seconds, "status": r.status, "reason": r.reason}
                         for n, r in ctx.stages.items()}}
     tmp = ctx.out / (STATE_FILE + ".tmp")
-    tmp.write_text(json.dumps(state, indent=2, default=_plain))
+    tmp.write_text(json.dumps(state, indent=2, default=plain))
     tmp.replace(ctx.out / STATE_FILE)  # atomic: a kill mid-write keeps the previous state
 
 
@@ -588,7 +553,10 @@ def run_demo(options: DemoOptions) -> DemoContext:
     InputError for bad input (wall file, output folder, a state of another run). KeyboardInterrupt propagates
     after the state of the finished stages has been saved.
     """
+    from arproj.run.scan import resolve_wall
+
     wall, wall_path = resolve_wall(options.wall)
+    wall_path = wall_path.resolve()
     if options.rig is not None:
         from geometry.rig import Rig
 
@@ -648,25 +616,6 @@ def _stdout_to_stderr() -> Iterator[None]:
         yield
 
 
-def _map_features(wall_map: Any, T_wall_from_projector: np.ndarray, intr: Any, registration: Any) -> np.ndarray:
-    """Points (n, 2) along the mapped objects every FEATURE_STEP_M, inside the inner part of the beamer image."""
-    pts = []
-    for obj in wall_map.objects:
-        p = np.asarray(obj.points_m, dtype=np.float64)
-        seq = np.concatenate([p, p[:1]]) if obj.is_outline else p
-        if len(seq) == 1:
-            pts.append(seq)
-        for a, b in itertools.pairwise(seq):
-            n = max(2, int(np.ceil(np.linalg.norm(b - a) / FEATURE_STEP_M)) + 1)
-            pts.append(a + np.linspace(0.0, 1.0, n)[:, None] * (b - a))
-    if not pts:
-        return np.zeros((0, 2))
-    pts = np.unique(np.round(np.concatenate(pts), 6), axis=0)
-    cam = transform_points(invert(T_wall_from_projector), np.column_stack([pts, np.zeros(len(pts))]))
-    _, inside = registration.project_in_view(intr, cam, margin=FEATURE_MARGIN)
-    return pts[inside]
-
-
 def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
     """Nested dict → {"a b": number} with only numbers kept (truth error figures of the wizard)."""
     out: dict[str, Any] = {}
@@ -676,14 +625,6 @@ def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
     elif isinstance(d, (int, float)) and not isinstance(d, bool):
         out[prefix] = float(d)
     return out
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    return str(value)
 
 
 HEADLINES = [  # (stage, figure, label, format)

@@ -23,6 +23,7 @@ from geometry.errors import InputError
 from geometry.frames import parse_pose_name
 from geometry.head import HeadModel
 from geometry.intrinsics import Intrinsics, read_camera_info, write_camera_info
+from geometry.plain import plain
 from geometry.poses import invert
 
 RIG_FILE = "rig.yaml"
@@ -59,7 +60,7 @@ class Rig:
             "version": 1,
             "intrinsics": files,
             "poses": {k: np.asarray(v, dtype=float).tolist() for k, v in self.poses.items()},
-            "quality": _plain(self.quality),
+            "quality": plain(self.quality),
         }
         if self.head is not None:
             doc["head"] = self.head.to_dict()
@@ -94,16 +95,3 @@ class Rig:
         if doc.get("head") is not None:
             rig.head = HeadModel.from_dict(doc["head"], source=f"{path}: head")
         return rig
-
-
-def _plain(value: object) -> object:
-    """numpy scalars/arrays to plain Python so YAML stays readable."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    return value

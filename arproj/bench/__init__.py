@@ -2,6 +2,10 @@
 
 `arproj bench NAME` runs one (a module here is a benchmark by being here); `arproj bench all` runs them all.
 Every benchmark runs its peer on the same input in the same run and reports the ratio.
+
+Each reads as experiment → table → headline: the experiment measures and returns named figures; a table row is
+a dataclass whose `column(header)` fields are the printed columns, in order (`columns(RowType)`, `cells(row)`);
+the headline picks its figures from the rows by name.
 """
 
 from __future__ import annotations
@@ -9,7 +13,7 @@ from __future__ import annotations
 import importlib
 import json
 import pkgutil
-from dataclasses import asdict, dataclass, field
+from dataclasses import MISSING, asdict, dataclass, field, fields
 from types import ModuleType
 from typing import Any
 
@@ -17,9 +21,27 @@ from rich.measure import Measurement
 from rich.table import Table
 
 from arproj.console import console
+from geometry.plain import plain
 
 # Quick runs take fewer trials: a target's "met" there is a hint, not the verdict.
 QUICK_CAVEAT = " (--quick: indicative only, judged on the full run)"
+
+
+def column(header: str, default: Any = MISSING) -> Any:
+    """A field of a table row (a dataclass), printed under `header`; the row's other fields are not printed."""
+    if default is MISSING:
+        return field(metadata={"column": header})
+    return field(default=default, metadata={"column": header})
+
+
+def columns(row_type: type) -> list[str]:
+    """The headers of a row dataclass's columns, in field order."""
+    return [f.metadata["column"] for f in fields(row_type) if "column" in f.metadata]
+
+
+def cells(row: Any) -> list[Any]:
+    """A row dataclass's column values, in the order of `columns`."""
+    return [getattr(row, f.name) for f in fields(row) if "column" in f.metadata]
 
 
 @dataclass
@@ -39,7 +61,7 @@ class BenchTable:
     environment: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> str:
-        return json.dumps(asdict(self), indent=2, default=_json_default)
+        return json.dumps(asdict(self), indent=2, default=plain)
 
     def print(self, targets: bool = True) -> None:
         """The table, its notes, then (targets=True) the headline figures: arproj, the peer, met or not."""
@@ -97,16 +119,6 @@ def _fmt(v: Any) -> str:
     if isinstance(v, bool):
         return "yes" if v else "NO"
     return str(v)
-
-
-def _json_default(v: Any) -> Any:
-    import numpy as np
-
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    raise TypeError(type(v).__name__)
 
 
 def benchmark_modules() -> dict[str, ModuleType]:

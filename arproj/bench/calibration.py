@@ -14,12 +14,14 @@ from __future__ import annotations
 
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import cv2
 import numpy as np
 
-from arproj.bench import BenchTable
+from arproj.bench import BenchTable, cells, column, columns
 from calibration.boards import Board, BoardView, parse_board, read_gray
 from calibration.epipolar import evaluate_pairs
 from calibration.stereo import calibrate_stereo, pair_views
@@ -93,7 +95,41 @@ def _arproj_pipeline(pairs: list[tuple[BoardView, BoardView]], board: Board) -> 
     return c.rms_px, c.left, c.right, c.T_right_from_left
 
 
-def held_out_comparison(folder: Path, attribution: bool = True) -> dict:
+class HeldOut(NamedTuple):
+    """A pipeline calibrated on half the pairs and evaluated on the other half, the mean of both ways round."""
+
+    epipolar_px_per_image: float
+    reprojection_rms_px: float
+    seconds: float   # per calibration
+
+
+@dataclass
+class RealComparison:
+    """Held-out figures per pipeline, and the training RMS (px) on all pairs of arproj and both OpenCV
+    pipelines (the data's README gives the latter two)."""
+
+    held_out: dict[str, HeldOut]
+    training_rms_px: dict[str, float]
+
+
+@dataclass
+class CalibrationRow:
+    """A real-data pipeline (epipolar, RMS, time) or a simulated quantity (error, target, met)."""
+
+    case: str = column("case")
+    epipolar_px: float | str = column("epipolar px/img", "")
+    rms_px: float | str = column("reproj. RMS px", "")
+    error: float | str = column("error", "")
+    target: str = column("target", "")
+    met_or_time: str = column("met / time", "")
+
+
+class SimFigure(NamedTuple):
+    value: float
+    unit: str
+
+
+def held_out_comparison(folder: Path, attribution: bool = True) -> RealComparison:
     """Held-out epipolar error (px per image) and reprojection RMS (px) of arproj and both OpenCV pipelines.
 
     attribution adds the peers run on arproj's corners and arproj evaluated on OpenCV's corners.
@@ -118,7 +154,7 @@ def held_out_comparison(folder: Path, attribution: bool = True) -> dict:
     if not attribution:
         pipelines = {k: v for k, v in pipelines.items() if k in ("arproj", "opencv stereo_calib",
                                                                   "opencv two-stage")}
-    out: dict = {}
+    held_out: dict[str, HeldOut] = {}
     for name, (pipeline, train_set, test_set) in pipelines.items():
         epi, rms, seconds = [], [], 0.0
         for train, test in halves:
@@ -128,16 +164,15 @@ def held_out_comparison(folder: Path, attribution: bool = True) -> dict:
             ev = evaluate_pairs(left, right, T, [test_set[i] for i in test])
             epi.append(ev.epipolar_px_per_image)
             rms.append(ev.reprojection_rms_px)
-        out[name] = {"epipolar_px_per_image": float(np.mean(epi)), "reprojection_rms_px": float(np.mean(rms)),
-                     "seconds": seconds / 2}
+        held_out[name] = HeldOut(float(np.mean(epi)), float(np.mean(rms)), seconds / 2)
     all_pairs = list(range(n))
-    out["reference"] = {
-        "opencv stereo_calib rms": opencv_sample_pipeline([theirs[i] for i in all_pairs], size)[0],
-        "opencv two-stage rms": opencv_two_stage_pipeline([theirs[i] for i in all_pairs], size)[0],
+    training = {
+        "opencv stereo_calib": opencv_sample_pipeline([theirs[i] for i in all_pairs], size)[0],
+        "opencv two-stage": opencv_two_stage_pipeline([theirs[i] for i in all_pairs], size)[0],
     }
     if attribution:
-        out["reference"]["arproj rms"] = _arproj_pipeline([ours[i] for i in all_pairs], board)[0]
-    return out
+        training["arproj"] = _arproj_pipeline([ours[i] for i in all_pairs], board)[0]
+    return RealComparison(held_out, training)
 
 
 def simulated_site(seed: int, quick: bool) -> dict:
@@ -149,28 +184,44 @@ def simulated_site(seed: int, quick: bool) -> dict:
     return {step: state["steps"][step] for step in ("stereo", "projector", "head", "validation")}
 
 
+def _sim_figures(sim: dict) -> dict[str, SimFigure]:
+    """Each simulated quantity's error against the truth (the worst of its parts), from the wizard's state."""
+    st, pr, hd, va = (sim[k]["truth_errors"] for k in ("stereo", "projector", "head", "validation"))
+    cam_f = max(abs(st[c][k]) for c in ("camera_left", "camera_right") for k in ("fx_pct", "fy_pct"))
+    cam_c = max(abs(st[c][k]) for c in ("camera_left", "camera_right") for k in ("cx_px", "cy_px"))
+    return {
+        "camera focal": SimFigure(cam_f, "%"), "camera principal point": SimFigure(cam_c, "px"),
+        "baseline": SimFigure(abs(st["baseline_mm"]), "mm"),
+        "projector focal": SimFigure(max(abs(pr["fx_pct"]), abs(pr["fy_pct"])), "%"),
+        "projector principal point": SimFigure(max(abs(pr["cx_px"]), abs(pr["cy_px"])), "px"),
+        "head orientation": SimFigure(hd["rotation_max_deg"], "°"),
+        "head position": SimFigure(hd["position_max_mm"], "mm"),
+        "validation (measured by the stereo pair)": SimFigure(sim["validation"]["quality"]["rms_mm"], "mm"),
+        "validation (vs true landing points)": SimFigure(va["rms_mm"], "mm"),
+    }
+
+
 def run(quick: bool = False, seed: int = 0) -> BenchTable:
-    rows: list[list] = []
+    rows: list[CalibrationRow] = []
     headline: dict = {}
     notes: list[str] = []
     folder = _data_folder()
     if folder is not None:
         real = held_out_comparison(folder)
         best_peer = min(("opencv stereo_calib", "opencv two-stage"),
-                        key=lambda k: real[k]["epipolar_px_per_image"])
-        for name, fig in real.items():
-            if name == "reference":
-                continue
-            rows.append([f"real held-out: {name}", fig["epipolar_px_per_image"], fig["reprojection_rms_px"],
-                         "", "", f"{1000 * fig['seconds']:.0f} ms"])
-        ref = real["reference"]
+                        key=lambda k: real.held_out[k].epipolar_px_per_image)
+        for name, fig in real.held_out.items():
+            rows.append(CalibrationRow(f"real held-out: {name}", fig.epipolar_px_per_image, fig.reprojection_rms_px,
+                                       met_or_time=f"{1000 * fig.seconds:.0f} ms"))
+        ref = real.training_rms_px
         notes.append(f"all 13 pairs (training RMS, README: 0.605 / 0.447 px): stereo_calib "
-                     f"{ref['opencv stereo_calib rms']:.3f} px, two-stage {ref['opencv two-stage rms']:.3f} px, "
-                     f"arproj {ref['arproj rms']:.3f} px")
+                     f"{ref['opencv stereo_calib']:.3f} px, two-stage {ref['opencv two-stage']:.3f} px, "
+                     f"arproj {ref['arproj']:.3f} px")
         for key, label in (("epipolar_px_per_image", "held-out epipolar px/image"),
                            ("reprojection_rms_px", "held-out reprojection RMS px")):
-            ours = real["arproj"][key]
-            peer = min(real["opencv stereo_calib"][key], real["opencv two-stage"][key])
+            ours = getattr(real.held_out["arproj"], key)
+            peer = min(getattr(real.held_out["opencv stereo_calib"], key),
+                       getattr(real.held_out["opencv two-stage"], key))
             headline[label] = {"arproj": round(ours, 4), "peer": round(peer, 4),
                                "peer_name": f"best OpenCV pipeline ({best_peer})", "unit": " px",
                                "target": "≤ best OpenCV pipeline", "met": ours <= peer}
@@ -178,29 +229,19 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
         notes.append("real images not found (../shared/data/opencv-stereo-chessboard): real-data rows skipped")
 
     sim = simulated_site(seed, quick)
-    st, pr, hd, va = (sim[k]["truth_errors"] for k in ("stereo", "projector", "head", "validation"))
-    cam_f = max(abs(st[c][k]) for c in ("camera_left", "camera_right") for k in ("fx_pct", "fy_pct"))
-    cam_c = max(abs(st[c][k]) for c in ("camera_left", "camera_right") for k in ("cx_px", "cy_px"))
-    sim_figs = {
-        "camera focal": (cam_f, "%"), "camera principal point": (cam_c, "px"),
-        "baseline": (abs(st["baseline_mm"]), "mm"),
-        "projector focal": (max(abs(pr["fx_pct"]), abs(pr["fy_pct"])), "%"),
-        "projector principal point": (max(abs(pr["cx_px"]), abs(pr["cy_px"])), "px"),
-        "head orientation": (hd["rotation_max_deg"], "°"), "head position": (hd["position_max_mm"], "mm"),
-        "validation (measured by the stereo pair)": (sim["validation"]["quality"]["rms_mm"], "mm"),
-        "validation (vs true landing points)": (va["rms_mm"], "mm"),
-    }
-    for name, (value, unit) in sim_figs.items():
+    for name, fig in _sim_figures(sim).items():
         target = SIM_TARGETS[name]
-        rows.append([f"sim: {name} error", "", "", value, f"≤ {target} {unit}", "yes" if value <= target else "NO"])
-        headline[f"sim {name} error"] = {"arproj": round(value, 4), "unit": f" {unit}", "target": f"≤ {target}",
-                                         "met": value <= target, "peer": "–", "peer_name": "simulated truth"}
+        rows.append(CalibrationRow(f"sim: {name} error", error=fig.value, target=f"≤ {target} {fig.unit}",
+                                   met_or_time="yes" if fig.value <= target else "NO"))
+        headline[f"sim {name} error"] = {"arproj": round(fig.value, 4), "unit": f" {fig.unit}",
+                                         "target": f"≤ {target}", "met": fig.value <= target, "peer": "–",
+                                         "peer_name": "simulated truth"}
     notes.append(f"sim: stereo RMS {sim['stereo']['quality']['reprojection_rms_px']:.3f} px; projector RMS "
                  f"{sim['projector']['quality']['projector_rms_px']:.3f} px; head errors are maxima over 3 head "
-                 f"angles not used for fitting; validation at those angles, {va['distance_m']:.2f} m away")
+                 f"angles not used for fitting; validation at those angles, "
+                 f"{sim['validation']['truth_errors']['distance_m']:.2f} m away")
     return BenchTable(
         name="calibration",
         title="calibration — held-out real stereo pairs vs OpenCV; simulated site vs truth",
-        columns=["case", "epipolar px/img", "reproj. RMS px", "error", "target", "met / time"],
-        rows=rows, notes=notes, headline=headline,
+        columns=columns(CalibrationRow), rows=[cells(r) for r in rows], notes=notes, headline=headline,
         environment={"opencv": cv2.__version__, "seed": seed, "quick": quick})

@@ -6,11 +6,12 @@ import os
 import statistics
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 
-from arproj.bench import BenchTable
+from arproj.bench import BenchTable, cells, column, columns
 from arproj.console import progress_bar
 from arproj.render import MeshRenderer
 from arproj.render.sample_wall import sample_wall_mesh
@@ -61,17 +62,94 @@ def _untextured(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=image[rows, cols], process=False)
 
 
+@dataclass
+class FrameTimes:
+    """Median ms per frame with read-back at one resolution: arproj (textured, with depth, untextured) and
+    pyrender (FLAT, default); how alike the two pictures are."""
+
+    ours_ms: float = float("nan")
+    ours_depth_ms: float = float("nan")
+    ours_untextured_ms: float = float("nan")
+    peer_ms: float = float("nan")
+    peer_default_ms: float = float("nan")
+    agreement: float = float("nan")   # correlation of arproj's and pyrender's (FLAT) grey values
+
+
+@dataclass
+class Rendering:
+    """The experiment: frame times per resolution, on this GL renderer, for a mesh of this many triangles."""
+
+    times: dict[tuple[int, int], FrameTimes]
+    renderer_name: str
+    triangles: int
+    frames: int
+
+
+@dataclass
+class RenderRow:
+    resolution: str = column("resolution")
+    ms: float = column("arproj ms")
+    fps: float = column("arproj fps")
+    depth_ms: float = column("arproj +depth ms")
+    untextured_ms: float = column("arproj untextured ms")
+    peer_ms: float = column("pyrender FLAT ms")
+    peer_default_ms: float = column("pyrender default ms")
+    speedup: float = column("× vs FLAT")
+    untextured_speedup: float = column("untextured × vs FLAT")
+    default_speedup: float = column("× vs default")
+
+    @classmethod
+    def of(cls, size: tuple[int, int], t: FrameTimes) -> RenderRow:
+        return cls(f"{size[0]}×{size[1]}", t.ours_ms, 1e3 / t.ours_ms, t.ours_depth_ms, t.ours_untextured_ms,
+                   t.peer_ms, t.peer_default_ms, t.peer_ms / t.ours_ms, t.peer_ms / t.ours_untextured_ms,
+                   t.peer_default_ms / t.ours_ms)
+
+
 def run(quick: bool = False, seed: int = 0) -> BenchTable:
     """Frame time of arproj's renderer vs pyrender on the same textured wall (≥200k triangles, 4096² texture),
     at 1920×1080 and 1280×800, with read-back."""
+    r = _experiment(8 if quick else 30)
+    rows = [RenderRow.of(size, r.times[size]) for size in RESOLUTIONS]
+    return BenchTable(
+        name="render",
+        title=f"arproj bench render — {r.triangles:,} triangles, 4096² texture, median of {r.frames} frames",
+        columns=columns(RenderRow), rows=[cells(row) for row in rows],
+        notes=[f"GL: {r.renderer_name}. Times are medians with read-back of the colour image. pyrender always "
+               "reads depth too: compare it with the '+depth' column.",
+               "arproj untextured: the same triangles with vertex colours instead of the texture, the floor of the "
+               "geometry's own cost on this renderer; 'untextured × vs FLAT' is the most any texture sampling "
+               "could leave of the ratio.",
+               "pyrender FLAT draws unlit like arproj (the like-for-like peer, the one the target is judged on); "
+               "pyrender default is its lit PBR shader.",
+               "Same-scene check, correlation of the two pictures' grey values (pyrender darkens the texture by "
+               "its sRGB handling): " + ", ".join(f"{w}×{h}: {t.agreement:.3f}" for (w, h), t in r.times.items())],
+        headline=_headline(rows, r.times[(1280, 800)]),
+        environment={"gl_renderer": r.renderer_name, "triangles": r.triangles, "frames": r.frames},
+    )
+
+
+def _headline(rows: list[RenderRow], at_1280: FrameTimes) -> dict[str, dict]:
+    headline = {}
+    for row in rows:
+        headline[f"speed-up vs pyrender at {row.resolution}"] = {
+            "arproj": round(row.ms, 2), "peer": round(row.peer_ms, 2), "peer_name": "pyrender",
+            "unit": " ms", "target": f"≥ {TARGET_SPEEDUP:g}× faster", "met": row.speedup >= TARGET_SPEEDUP}
+    fps_1280 = 1e3 / at_1280.ours_ms
+    headline["frames/s at 1280×800 with read-back"] = {
+        "arproj": round(fps_1280, 1), "peer": round(1e3 / at_1280.peer_ms, 1), "peer_name": "pyrender",
+        "unit": " fps", "target": f"≥ {TARGET_FPS_1280:g}", "met": fps_1280 >= TARGET_FPS_1280}
+    return headline
+
+
+def _experiment(frames: int) -> Rendering:
+    """Both renderers on the same textured wall at every resolution; arproj's untextured floor too."""
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")  # before pyrender imports PyOpenGL
     import pyrender
 
-    frames = 8 if quick else 30
     mesh = sample_wall_mesh()
     T_wall_from_projector = oblique_pose()
-    ours_ms, ours_plain_ms, ours_depth_ms, ours_images = {}, {}, {}, {}
-    peer_ms, peer_default_ms, agreement = {}, {}, {}
+    times = {size: FrameTimes() for size in RESOLUTIONS}
+    ours_images = {}
     with progress_bar() as bar:
         task = bar.add_task("render", total=len(RESOLUTIONS) * 4)
         with MeshRenderer() as ours:
@@ -80,10 +158,10 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
                 intr = projector_intrinsics(*size)
                 t, ours_images[size] = _time_frames(
                     lambda intr=intr: ours.render(intr, T_wall_from_projector).color, frames)
-                ours_ms[size] = t * 1e3
+                times[size].ours_ms = t * 1e3
                 bar.advance(task)
                 t, _ = _time_frames(lambda intr=intr: ours.render(intr, T_wall_from_projector, depth=True), frames)
-                ours_depth_ms[size] = t * 1e3
+                times[size].ours_depth_ms = t * 1e3
                 bar.advance(task)
             # The floor: the same triangles without texture sampling. What llvmpipe needs for the geometry
             # alone bounds the ratio any texturing could reach.
@@ -91,7 +169,7 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
             for size in RESOLUTIONS:
                 intr = projector_intrinsics(*size)
                 t, _ = _time_frames(lambda intr=intr: ours.render(intr, T_wall_from_projector).color, frames)
-                ours_plain_ms[size] = t * 1e3
+                times[size].ours_untextured_ms = t * 1e3
                 bar.advance(task)
             with ours.ctx:
                 renderer_name = ours.ctx.info["GL_RENDERER"]
@@ -111,43 +189,12 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
             # FLAT: unlit textured, the same work arproj's shader does (pyrender reads colour and depth).
             t, (peer_img, _) = _time_frames(lambda peer=peer: peer.render(scene, flags=pyrender.RenderFlags.FLAT),
                                             frames)
-            peer_ms[size] = t * 1e3
+            times[size].peer_ms = t * 1e3
             # pyrender's default: its lit PBR shader, what a user gets from renderer.render(scene).
             t, _ = _time_frames(lambda peer=peer: peer.render(scene), max(3, frames // 3), warmup=1)
-            peer_default_ms[size] = t * 1e3
+            times[size].peer_default_ms = t * 1e3
             peer.delete()
             scene.remove_node(camera_node)
-            agreement[size] = _same_picture(ours_images[size], peer_img)
+            times[size].agreement = _same_picture(ours_images[size], peer_img)
             bar.advance(task)
-    rows, headline = [], {}
-    for size in RESOLUTIONS:
-        name = f"{size[0]}×{size[1]}"
-        speedup = peer_ms[size] / ours_ms[size]
-        rows.append([name, ours_ms[size], 1e3 / ours_ms[size], ours_depth_ms[size], ours_plain_ms[size],
-                     peer_ms[size], peer_default_ms[size], speedup, peer_ms[size] / ours_plain_ms[size],
-                     peer_default_ms[size] / ours_ms[size]])
-        headline[f"speed-up vs pyrender at {name}"] = {
-            "arproj": round(ours_ms[size], 2), "peer": round(peer_ms[size], 2), "peer_name": "pyrender",
-            "unit": " ms", "target": f"≥ {TARGET_SPEEDUP:g}× faster", "met": speedup >= TARGET_SPEEDUP}
-    fps_1280 = 1e3 / ours_ms[(1280, 800)]
-    headline["frames/s at 1280×800 with read-back"] = {
-        "arproj": round(fps_1280, 1), "peer": round(1e3 / peer_ms[(1280, 800)], 1), "peer_name": "pyrender",
-        "unit": " fps", "target": f"≥ {TARGET_FPS_1280:g}", "met": fps_1280 >= TARGET_FPS_1280}
-    return BenchTable(
-        name="render",
-        title=f"arproj bench render — {len(mesh.faces):,} triangles, 4096² texture, median of {frames} frames",
-        columns=["resolution", "arproj ms", "arproj fps", "arproj +depth ms", "arproj untextured ms",
-                 "pyrender FLAT ms", "pyrender default ms", "× vs FLAT", "untextured × vs FLAT", "× vs default"],
-        rows=rows,
-        notes=[f"GL: {renderer_name}. Times are medians with read-back of the colour image. pyrender always "
-               "reads depth too: compare it with the '+depth' column.",
-               "arproj untextured: the same triangles with vertex colours instead of the texture, the floor of the "
-               "geometry's own cost on this renderer; 'untextured × vs FLAT' is the most any texture sampling "
-               "could leave of the ratio.",
-               "pyrender FLAT draws unlit like arproj (the like-for-like peer, the one the target is judged on); "
-               "pyrender default is its lit PBR shader.",
-               "Same-scene check, correlation of the two pictures' grey values (pyrender darkens the texture by "
-               "its sRGB handling): " + ", ".join(f"{w}×{h}: {v:.3f}" for (w, h), v in agreement.items())],
-        headline=headline,
-        environment={"gl_renderer": renderer_name, "triangles": len(mesh.faces), "frames": frames},
-    )
+    return Rendering(times, renderer_name, len(mesh.faces), frames)

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from arproj.bench import BenchTable
+from arproj.bench import BenchTable, cells, column, columns
 from arproj.console import track
 
 TARGET_TIME_RATIO_HARD = 0.25  # adaptive ≤ 1/4 of the dense raster's time on the hard-case walls
@@ -80,23 +80,6 @@ class PlanStats:
         return self.unknown_m / self.probed_m if self.probed_m else 0.0
 
 
-def scan_and_map(wall, plan: str, seed: int, options: dict | None = None):
-    """Scan `wall` on the simulated site with `plan` and its `options` (as make_planner takes them; in-process
-    devices), map it as `arproj map` does; returns (scanner.run.ScanResult, mapping.pipeline.MapResult)."""
-    from mapping.pipeline import ScanData, build_map
-    from scanner.plan import DriveConfig
-    from scanner.run import DirectBackend, run_scan, scan_meta, simulated_site
-    from scanner.sensor_model import SensorConfig
-
-    sensor, drives = SensorConfig(), DriveConfig()
-    world, robot = simulated_site(wall, sensor, drives, seed)
-    scan = run_scan(wall, DirectBackend(world), robot, plan_kind=plan, plan_options=options, sensor=sensor,
-                    drives=drives)
-    meta = scan_meta(wall, wall.source, {"kind": plan, **(options or {})}, sensor, drives, seed, True)
-    data = ScanData.from_scan(f"{plan} scan of {wall.name}", scan.samples, scan.frames, meta)
-    return scan, build_map(data)
-
-
 def _score(stats: PlanStats, wall, scan, result) -> None:
     from mapping.evaluate import (
         area_recall,
@@ -136,19 +119,41 @@ def _score(stats: PlanStats, wall, scan, result) -> None:
     stats.samples += len(scan.samples["time_s"])
 
 
+@dataclass
+class ScanRow:
+    """One wall set × plan: mean scan time, passes and samples per wall, and the product's scores."""
+
+    walls_plan: str = column("walls: plan")
+    scan_time_h: float = column("scan time h")
+    passes: float = column("passes")
+    samples: float = column("samples")
+    found: str = column("found")
+    recall: float = column("recall")
+    measured_found: str = column("measured found")
+    measured_recall: float = column("measured recall")
+    error_mm: float = column("error mm")
+    fasteners: str = column("fasteners")
+    areas: str = column("areas")
+    area_recall: float = column("area recall")
+    depth_mm: float = column("depth err mm")
+    depth_n: int = column("depth n")
+    as_wood: int = column("pipes as wood")
+    false_safe_pct: float = column("false-safe %")
+    unknown_pct: float = column("unknown %")
+    cpu_s: float = column("cpu s / wall")
+
+
 def _row(label: str, st: PlanStats) -> list:
     n = max(len(st.hours), 1)
-    return [label, float(np.mean(st.hours)), st.passes / n, st.samples / n,
-            f"{st.found}/{st.targets}", st.recall, f"{st.measured_found}/{st.targets}", st.measured_recall,
-            float(np.mean(st.errors_m)) * 1000 if st.errors_m else float("nan"),
-            f"{st.fasteners_found}/{st.fasteners}", f"{st.areas_found}/{st.areas}", st.area_recall,
-            st.depth_mm, len(st.depth_errors_m), len(st.as_wood), 100 * st.false_safe, 100 * st.unknown,
-            st.cpu_s / n]
+    return cells(ScanRow(
+        label, float(np.mean(st.hours)), st.passes / n, st.samples / n, f"{st.found}/{st.targets}", st.recall,
+        f"{st.measured_found}/{st.targets}", st.measured_recall,
+        float(np.mean(st.errors_m)) * 1000 if st.errors_m else float("nan"), f"{st.fasteners_found}/{st.fasteners}",
+        f"{st.areas_found}/{st.areas}", st.area_recall, st.depth_mm, len(st.depth_errors_m), len(st.as_wood),
+        100 * st.false_safe, 100 * st.unknown, st.cpu_s / n))
 
 
-COLUMNS = ["walls: plan", "scan time h", "passes", "samples", "found", "recall", "measured found",
-           "measured recall", "error mm", "fasteners", "areas", "area recall", "depth err mm", "depth n",
-           "pipes as wood", "false-safe %", "unknown %", "cpu s / wall"]
+COLUMNS = columns(ScanRow)
 
 
 def _worst(stats: dict[tuple[str, str], PlanStats], plan: str, figure: str, highest: bool = False) -> float:
@@ -217,6 +222,7 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
     """Adaptive plan vs dense raster: simulated scan time, recall (plain and as measured stretches), position
     and depth error, fasteners, studs, plates and cavities, pipes labelled wood and false-safe length of what
     `arproj map` makes of each scan."""
+    from arproj.run.scan import scan_and_map
     from scanner.hard_walls import N_HARD_CASE_WALLS, hard_case_wall
     from scanner.wall import random_wall
 
@@ -235,7 +241,7 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
         st.cpu_s += time.process_time() - start
     rows = [_row(f"{name}: {plan}", st) for (name, plan), st in stats.items()]
     ratio = _time_ratio(stats)
-    worst = max((stats[(n, p)].worst for n in sets for p in RUNS), key=lambda w: w[1])
+    worst_object, worst_share = max((stats[(n, p)].worst for n in sets for p in RUNS), key=lambda w: w[1])
     fine = {name: float(np.mean(stats[(name, FINE)].hours)) / float(np.mean(stats[(name, "dense")].hours))
             for name in sets}
     as_wood = [f"{plan}: {w}" for (_, plan), st in stats.items() for w in st.as_wood]
@@ -274,7 +280,7 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
         "(the sensor model, noise-free, at the planner's 0.10 peak threshold), so fasteners off every stud and "
         "course are found only with rows this close; its time ratio to the dense raster: hard-case "
         f"{fine['hard-case']:.3f}, random {fine['random']:.3f}.",
-        f"worst false-safe object: {worst[0] or 'none'} ({100 * worst[1]:.1f} % of its length).",
+        f"worst false-safe object: {worst_object or 'none'} ({100 * worst_share:.1f} % of its length).",
     ]
     return BenchTable(
         name="scan",

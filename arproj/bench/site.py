@@ -7,12 +7,13 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from arproj.bench import BenchTable
+from arproj.bench import BenchTable, cells, column, columns
 from arproj.sim import Site, optics, patterns
 from arproj.sim.room import KIND_TARGET, raycast
 from arproj.sim.site import pixel_directions
@@ -112,7 +113,26 @@ def _dot_errors(site: Site, camera: str, make: Callable[[NDArray[np.uint8]], NDA
     return err[np.isfinite(err)]
 
 
-def _measure(site: Site, camera: str, cycle: list[NDArray[np.uint8]], repeats: int) -> dict[str, float]:
+@dataclass
+class SiteRow:
+    """One placement of the robot: photo times (ms; CPU ms of all threads) and projected-point errors (px)."""
+
+    placement: str = column("placement")
+    cold_ms: float = column("new view ms")       # first photo after the robot/head moved
+    cold_cpu_ms: float = column("(CPU ms)")
+    warm_ms: float = column("new pattern ms")    # another projector image at the same pose
+    warm_cpu_ms: float = column("(CPU ms)")
+    peer_ms: float = column("peer ms")
+    dense_max_px: float = column("point err max px")
+    dense_p999_px: float = column("(p99.9)")
+    dots_px: float = column("dots max px")
+    dots_direct_px: float = column("dots direct-GL px")
+    dots_peer_px: float = column("dots peer px")
+    dots_noisy_px: float = column("dots noisy med px")
+    peer_cpu_ms: float = float("nan")
+
+
+def _measure(site: Site, camera: str, cycle: list[NDArray[np.uint8]], repeats: int, placement: str) -> SiteRow:
     """Timings (ms) and errors (px) at the site's current placement."""
     counter = iter(range(10**9))
 
@@ -126,17 +146,15 @@ def _measure(site: Site, camera: str, cycle: list[NDArray[np.uint8]], repeats: i
     def peer() -> object:
         return _cpu_photograph(site, camera, cycle[next(counter) % len(cycle)], True)
 
-    out: dict[str, float] = {}
-    out["cold"], out["cold_cpu"] = _timed(cold, repeats)
-    out["warm"], out["warm_cpu"] = _timed(warm, repeats)
-    out["peer"], out["peer_cpu"] = _timed(peer, max(2, repeats // 3))
+    cold_ms, cold_cpu = _timed(cold, repeats)
+    warm_ms, warm_cpu = _timed(warm, repeats)
+    peer_ms, peer_cpu = _timed(peer, max(2, repeats // 3))
     model = site.camera_models[camera]
-    out["arproj"] = float(np.max(_dot_errors(site, camera,
-                                             lambda img: site.photograph(camera, img, noise=False).image)))
-    out["direct"] = float(np.max(_dot_errors(
+    dots = float(np.max(_dot_errors(site, camera, lambda img: site.photograph(camera, img, noise=False).image)))
+    direct = float(np.max(_dot_errors(
         site, camera, lambda img: model.develop(site.render_radiance(camera, img), None, None))))
-    out["peer_err"] = float(np.max(_dot_errors(site, camera, lambda img: _cpu_photograph(site, camera, img, False))))
-    out["noisy"] = float(np.median(_dot_errors(site, camera, lambda img: site.photograph(camera, img).image)))
+    dots_peer = float(np.max(_dot_errors(site, camera, lambda img: _cpu_photograph(site, camera, img, False))))
+    noisy = float(np.median(_dot_errors(site, camera, lambda img: site.photograph(camera, img).image)))
     # Dense check, no estimator involved: for sampled lit camera pixels, the projector pixel whose light the
     # renderer put there is cast onto the room exactly and projected back into the camera (cv2.projectPoints):
     # the distance to the pixel itself is the position error of projected points in the image.
@@ -150,49 +168,20 @@ def _measure(site: Site, camera: str, cycle: list[NDArray[np.uint8]], repeats: i
     landing = site.raycast("projector", projector_px).points_room
     back = site.intrinsics(camera).project(transform_points(invert(site.T_room_from(camera)), landing))
     dense = np.hypot(back[:, 0] - cols, back[:, 1] - rows)
-    out["dense_p999"] = float(np.percentile(dense, 99.9))
-    out["dense_max"] = float(np.max(dense))
-    return out
+    return SiteRow(placement, cold_ms, cold_cpu, warm_ms, warm_cpu, peer_ms, float(np.max(dense)),
+                   float(np.percentile(dense, 99.9)), dots, direct, dots_peer, noisy, peer_cpu)
 
 
 def run(quick: bool = False, seed: int = 0) -> BenchTable:
     repeats = 3 if quick else 9
-    placements = [(2.5, 0.0), (2.0, 25.0), (3.0, -35.0)][: 2 if quick else 3]
-    camera = "camera_left"
-    rows: list[list[object]] = []
-    cold_ms: list[float] = []
-    warm_ms: list[float] = []
-    peer_ms: list[float] = []
-    cold_cpu: list[float] = []
-    warm_cpu: list[float] = []
-    errors: dict[str, list[float]] = {"arproj": [], "direct": [], "peer_err": [], "noisy": [], "dense_p999": [],
-                                      "dense_max": []}
-    with Site.build(seed=seed) as site:
-        cycle = [patterns.dot_pattern(site.projector, patterns.dot_grid(site.projector), sigma_px=2.0 + k)
-                 for k in range(4)]
-        site.photograph(camera, cycle[0])          # compile shaders, build lookup tables
-        for distance, incidence in placements:
-            site.place_robot(distance, incidence)
-            m = _measure(site, camera, cycle, repeats)
-            cold_ms.append(m["cold"])
-            warm_ms.append(m["warm"])
-            peer_ms.append(m["peer"])
-            for key in errors:
-                errors[key].append(m[key])
-            cold_cpu.append(m["cold_cpu"])
-            warm_cpu.append(m["warm_cpu"])
-            rows.append([f"{distance} m, {incidence:+.0f}°", m["cold"], m["cold_cpu"], m["warm"], m["warm_cpu"],
-                         m["peer"], m["dense_max"], m["dense_p999"], m["arproj"], m["direct"], m["peer_err"],
-                         m["noisy"]])
-    cold, warm, peer_t = float(np.median(cold_ms)), float(np.median(warm_ms)), float(np.median(peer_ms))
-    err_dense, err_dots, err_peer = max(errors["dense_max"]), max(errors["arproj"]), max(errors["peer_err"])
+    rows = _experiment(repeats, [(2.5, 0.0), (2.0, 25.0), (3.0, -35.0)][: 2 if quick else 3], seed)
+    cold = float(np.median([r.cold_ms for r in rows]))
+    warm = float(np.median([r.warm_ms for r in rows]))
+    peer_t = float(np.median([r.peer_ms for r in rows]))
     table = BenchTable(
         name="site",
         title="arproj bench site — simulated camera photo of the projector-lit room (1280×800, all effects)",
-        columns=["placement", "new view ms", "(CPU ms)", "new pattern ms", "(CPU ms)", "peer ms",
-                 "point err max px", "(p99.9)", "dots max px", "dots direct-GL px", "dots peer px",
-                 "dots noisy med px"],
-        rows=rows,
+        columns=columns(SiteRow), rows=[cells(r) for r in rows],
         notes=[
             "new view: first photo after the robot/head moved (GL pass + readback + warp + sensor); new "
             "pattern: another projector image at the same pose (projector lookup + sensor only).",
@@ -208,26 +197,45 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
             f"timings: median wall clock of {repeats} trials per placement on a shared 2-core machine "
             f"(load average {os.getloadavg()[0]:.1f} at the end); CPU ms: process CPU time of all threads "
             "(llvmpipe's included), which the machine's load does not inflate.",
+            f"speed vs peer: new pattern {peer_t / warm:.1f}× faster, new view {peer_t / cold:.1f}× faster",
         ],
-        headline={
-            "photo, new pattern (ms)": {"arproj": round(warm, 1), "peer": round(peer_t, 1), "peer_name": PEER,
-                                        "unit": " ms", "target": f"≤ {TARGET_MS:.0f} ms",
-                                        "met": warm <= TARGET_MS},
-            "photo, new view (ms)": {"arproj": round(cold, 1), "peer": round(peer_t, 1), "peer_name": PEER,
-                                     "unit": " ms", "target": f"≤ {TARGET_MS:.0f} ms", "met": cold <= TARGET_MS},
-            "photo, new view (CPU ms)": {"arproj": round(float(np.median(cold_cpu)), 1), "peer": "–",
-                                         "peer_name": "process CPU time, all threads", "unit": " ms",
-                                         "target": f"≤ {TARGET_MS:.0f} ms",
-                                         "met": float(np.median(cold_cpu)) <= TARGET_MS},
-            "projected point error, max (px)": {"arproj": round(err_dense, 4), "peer": "exact (by construction)",
-                                                "peer_name": PEER, "unit": " px", "target": f"≤ {TARGET_PX} px",
-                                                "met": err_dense <= TARGET_PX},
-            "dot centroid error, max (px)": {"arproj": round(err_dots, 4), "peer": round(err_peer, 4),
-                                             "peer_name": PEER, "unit": " px",
-                                             "target": "info: 8-bit photo + centroid estimator", "met": None},
-        },
+        headline=_headline(rows, cold, warm, peer_t),
         environment={"renderer": "Mesa llvmpipe (EGL)", "trials_per_placement": repeats},
     )
-    table.notes.append(f"speed vs peer: new pattern {peer_t / warm:.1f}× faster, new view {peer_t / cold:.1f}× "
-                       "faster")
     return table
+
+
+def _experiment(repeats: int, placements: list[tuple[float, float]], seed: int) -> list[SiteRow]:
+    """Photos and their errors at each placement (distance m, incidence °) of the robot, camera_left."""
+    camera = "camera_left"
+    rows = []
+    with Site.build(seed=seed) as site:
+        cycle = [patterns.dot_pattern(site.projector, patterns.dot_grid(site.projector), sigma_px=2.0 + k)
+                 for k in range(4)]
+        site.photograph(camera, cycle[0])          # compile shaders, build lookup tables
+        for distance, incidence in placements:
+            site.place_robot(distance, incidence)
+            rows.append(_measure(site, camera, cycle, repeats, f"{distance} m, {incidence:+.0f}°"))
+    return rows
+
+
+def _headline(rows: list[SiteRow], cold: float, warm: float, peer_t: float) -> dict[str, dict]:
+    """Median photo times over the placements; the largest errors."""
+    cold_cpu = float(np.median([r.cold_cpu_ms for r in rows]))
+    err_dense = max(r.dense_max_px for r in rows)
+    err_dots, err_peer = max(r.dots_px for r in rows), max(r.dots_peer_px for r in rows)
+    return {
+        "photo, new pattern (ms)": {"arproj": round(warm, 1), "peer": round(peer_t, 1), "peer_name": PEER,
+                                    "unit": " ms", "target": f"≤ {TARGET_MS:.0f} ms", "met": warm <= TARGET_MS},
+        "photo, new view (ms)": {"arproj": round(cold, 1), "peer": round(peer_t, 1), "peer_name": PEER,
+                                 "unit": " ms", "target": f"≤ {TARGET_MS:.0f} ms", "met": cold <= TARGET_MS},
+        "photo, new view (CPU ms)": {"arproj": round(cold_cpu, 1), "peer": "–",
+                                     "peer_name": "process CPU time, all threads", "unit": " ms",
+                                     "target": f"≤ {TARGET_MS:.0f} ms", "met": cold_cpu <= TARGET_MS},
+        "projected point error, max (px)": {"arproj": round(err_dense, 4), "peer": "exact (by construction)",
+                                            "peer_name": PEER, "unit": " px", "target": f"≤ {TARGET_PX} px",
+                                            "met": err_dense <= TARGET_PX},
+        "dot centroid error, max (px)": {"arproj": round(err_dots, 4), "peer": round(err_peer, 4),
+                                         "peer_name": PEER, "unit": " px",
+                                         "target": "info: 8-bit photo + centroid estimator", "met": None},
+    }

@@ -71,7 +71,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         as_json: bool = typer.Option(False, "--json", help="Print the session's results as JSON."),
     ) -> None:
         """Project the in-wall map onto the wall, pre-warped for the beamer, with a safety gate."""
-        from arproj.session.cli_run import SessionOptions, run_session
+        from arproj.run.project import SessionOptions, run_session
 
         options = SessionOptions(
             map_path=map_path, objects=objects, truth=truth, rig_dir=rig_dir, sim=sim, seed=seed,

@@ -45,20 +45,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     ) -> None:
         """Scan a wall: frames, passes and every sample go to a SQLite log, batch by batch (kill -9 safe)."""
         from arproj.console import console, progress_bar
-        from devices.sim import FaultConfig
-        from scanner.hardware import simulated_devices
-        from scanner.log import ScanLog
-        from scanner.plan import DriveConfig
-        from scanner.run import (
-            DirectBackend,
-            config_from_meta,
-            open_for_resume,
-            run_scan,
-            scan_meta,
-            simulated_site,
-        )
-        from scanner.sensor_model import SensorConfig
-        from scanner.wall import load_wall
+        from arproj.run.scan import ScanSettings, new_scan_log, resolve_wall, scan_simulated
+        from scanner.run import open_for_resume
 
         if not 0.0 <= faults <= 0.5:
             raise InputError(f"--faults = {faults}: must be a probability between 0 and 0.5")
@@ -66,13 +54,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             if log is not None:
                 raise InputError("give either --resume LOG or --log LOG, not both")
             scan_log, the_wall = open_for_resume(resume, wall)
-            meta = scan_log.meta
-            if meta.get("seed") is None:
-                raise InputError(f"{resume}: the log was not made on the simulated site; resuming hardware scans "
-                                 "needs the devices' URLs, which this command does not take yet")
-            sensor, drives = config_from_meta(meta)
-            plan_kind, plan_options, seed = meta["plan"]["kind"], meta["plan"], int(meta["seed"])
-            if meta.get("status") == "complete":
+            settings = ScanSettings.from_log(scan_log.meta, resume)
+            if scan_log.meta.get("status") == "complete":
                 console.print(f"{resume}: scan already complete ({scan_log.pass_count()} passes)")
                 return
         else:
@@ -83,25 +66,15 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                  "real devices are driven by scanner.hardware.DeviceBackend with their serial URLs")
             if plan not in ("dense", "adaptive"):
                 raise InputError(f"--plan = {plan!r}: use dense or adaptive")
-            from scanner.wall import shipped_walls
-
-            if not wall.exists() and wall.stem in shipped_walls() and wall.parent == Path():
-                wall = shipped_walls()[wall.stem]  # a shipped wall by name, e.g. --wall paper_test_plate
-            the_wall = load_wall(wall)
-            sensor, drives = SensorConfig(), DriveConfig()
+            the_wall, wall = resolve_wall(wall)
             if not 0.02 <= row_spacing <= the_wall.height_m:
                 raise InputError(f"--row-spacing = {row_spacing:g} m: must lie between 0.02 m and the wall's height "
                                  f"({the_wall.height_m:g} m)", "the default 0.25 is the plan's; 0.075 finds loose "
                                  "fasteners too")
-            plan_kind, plan_options = plan, ({"priors": priors, "coarse_row_spacing_m": row_spacing}
-                                             if plan == "adaptive" else None)
-            from scanner.plan import make_planner
-
-            planner = make_planner(plan, the_wall, drives, sensor.hysteresis_m, plan_options)
-            planner.frames()  # reach check before a log is created
-            scan_log = ScanLog.create(log, scan_meta(the_wall, str(wall), planner.describe(), sensor, drives,
-                                                     seed, simulated=True), overwrite=overwrite)
-        world, robot = simulated_site(the_wall, sensor, drives, seed)
+            settings = ScanSettings(plan=plan, plan_options={"priors": priors, "coarse_row_spacing_m": row_spacing}
+                                    if plan == "adaptive" else None, seed=seed)
+            scan_log = new_scan_log(log, the_wall, str(wall), settings, overwrite=overwrite)
+        settings.serial, settings.faults = not fast, faults
         with progress_bar() as bar:
             task = bar.add_task("scanning", total=1.0)
 
@@ -109,23 +82,14 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                 bar.update(task, completed=t, total=total,
                            description=f"scan {_fmt_duration(t)}/~{_fmt_duration(total)}")
 
-            if fast:
-                result = run_scan(the_wall, DirectBackend(world), robot, plan_kind=plan_kind,
-                                  plan_options=plan_options, sensor=sensor, drives=drives, log=scan_log,
-                                  progress=progress)
-                recovered = 0
-            else:
-                with simulated_devices(world, FaultConfig(rate=faults, seed=seed)) as (backend, g, s):
-                    result = run_scan(the_wall, backend, robot, plan_kind=plan_kind, plan_options=plan_options,
-                                      sensor=sensor, drives=drives, log=scan_log, progress=progress)
-                    recovered = backend.faults_recovered
-                    injected = sum((g.faults.counts + s.faults.counts).values())
-                if faults > 0:
-                    console.print(f"device faults injected: {injected}, recovered: {recovered}")
+            scan = scan_simulated(the_wall, settings, scan_log, progress)
+        result = scan.result
+        if settings.serial and faults > 0:
+            console.print(f"device faults injected: {scan.faults_injected}, recovered: {scan.faults_recovered}")
         n = len(result.samples.get("time_s", []))
         console.print(f"{scan_log.path}: {result.n_frames} frames, {result.n_passes} passes "
                       f"({result.measured_passes} measured now), {n} samples; simulated scan time "
-                      f"{_fmt_duration(result.scan_time_s)} ({plan_kind})")
+                      f"{_fmt_duration(result.scan_time_s)} ({settings.plan})")
         if result.plan_report or result.plan_priors:
             from scanner.plan import PRIORS_RULE, STOPPING_RULE
 

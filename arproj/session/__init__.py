@@ -10,7 +10,6 @@ Modules:
     session       ProjectionSession: aim, estimate, verify, decide, show
     robot_io      the simulated robot (site + Pelco-D head simulator) and real hardware behind one interface
     output        beamer window (fullscreen, own process), PNG sequence, memory
-    cli_run       what `arproj project` runs
     evaluate      ground truth of the registration on the simulated site (benchmark, tests)
     scenarios     feature-level degraded scenarios for the safety gate (benchmark, tests)
 """

@@ -8,6 +8,8 @@ registration error of what the person sees.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -17,6 +19,29 @@ from geometry.poses import invert, transform_points
 MARK_SEPARATION_RADII = 4.0   # marks in one frame: centres at least this many (summed) radii apart
 MARK_RADIUS_PX = 2.5          # each mark covers at least this many projector pixels in radius
 MIN_MARK_RADIUS_M = 0.004
+FEATURE_STEP_M = 0.05          # registration error: map points every 5 cm along the mapped objects …
+FEATURE_MARGIN = 0.05          # … inside the inner 90 % of the beamer image
+
+
+def map_features(wall_map: object, T_wall_from_projector: NDArray[np.float64], intr: object) -> NDArray[np.float64]:
+    """Wall points (n, 2) along the map's objects (every FEATURE_STEP_M; fasteners as they are; outlines
+    closed) that the beamer at T_wall_from_projector shows inside the inner part of its image: where the
+    registration error is measured. An empty map gives (0, 2)."""
+    pts = []
+    for obj in wall_map.objects:  # type: ignore[attr-defined]
+        p = np.asarray(obj.points_m, dtype=np.float64)
+        seq = np.concatenate([p, p[:1]]) if obj.is_outline else p
+        if len(seq) == 1:
+            pts.append(seq)
+        for a, b in itertools.pairwise(seq):
+            n = max(2, int(np.ceil(np.linalg.norm(b - a) / FEATURE_STEP_M)) + 1)
+            pts.append(a + np.linspace(0.0, 1.0, n)[:, None] * (b - a))
+    if not pts:
+        return np.zeros((0, 2))
+    pts = np.unique(np.round(np.concatenate(pts), 6), axis=0)
+    cam = transform_points(invert(T_wall_from_projector), np.column_stack([pts, np.zeros(len(pts))]))
+    _, inside = registration.project_in_view(intr, cam, margin=FEATURE_MARGIN)  # type: ignore[arg-type]
+    return pts[inside]
 
 
 def separated_passes(points_px: NDArray[np.float64], radii_px: NDArray[np.float64]) -> list[NDArray[np.int64]]:

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from arproj.session.output import FrameOutput
 from devices.pelco_d import PanTiltHead
-from devices.sim import HeadSimulator
+from devices.sim import HeadFaults, HeadSimulator
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert
@@ -63,6 +63,19 @@ class SimulatedRobot:
         self.prior = prior
         self._synced: tuple[float, float] | None = None
         self.wall = site.walls[self.wall_index]  # type: ignore[attr-defined]
+
+    @classmethod
+    def on_site(cls, site: object, wall_index: int = 0, output: FrameOutput | None = None, prior: str = "measured",
+                *, seed: int = 0, head_faults: HeadFaults | None = None, head_speed_deg_s: float | None = None,
+                timeout_s: float = 0.2, retries: int = 3, settle_timeout_s: float = 3.0) -> SimulatedRobot:
+        """The robot on `site`, its head a HeadSimulator (seeded; `head_faults` injected; `head_speed_deg_s`,
+        None: the simulator's own) started at the angles the site's head is commanded to, and reached over
+        Pelco-D on socket:// with these timeouts, as a real head is."""
+        speed = {} if head_speed_deg_s is None else {"speed_deg_s": head_speed_deg_s}
+        head_sim = HeadSimulator(faults=head_faults, seed=seed, **speed,
+                                 initial_deg=tuple(float(a) for a in site.head_angles_cmd_deg[:2]))  # type: ignore
+        head = PanTiltHead(head_sim.url, timeout_s=timeout_s, retries=retries, settle_timeout_s=settle_timeout_s)
+        return cls(site, wall_index, head_sim, head, output, prior)
 
     def sync_head(self) -> None:
         """Move the site's head to where the simulated head physically is (slip included)."""

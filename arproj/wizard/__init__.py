@@ -20,6 +20,7 @@ from typing import Any
 
 from arproj.console import console, track
 from geometry.errors import InputError
+from geometry.plain import plain
 from geometry.rig import RIG_FILE, Rig
 
 STATE_FILE = "wizard_state.json"
@@ -57,18 +58,8 @@ def _load_state(out: Path) -> dict[str, Any] | None:
 
 def _save_state(out: Path, state: dict[str, Any]) -> None:
     tmp = out / (STATE_FILE + ".tmp")
-    tmp.write_text(json.dumps(state, indent=2, default=_plain))
+    tmp.write_text(json.dumps(state, indent=2, default=plain))
     tmp.replace(out / STATE_FILE)  # atomic: an interruption never leaves half a state file
-
-
-def _plain(value: Any) -> Any:
-    import numpy as np
-
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(type(value).__name__)
 
 
 def next_step(state: dict[str, Any]) -> str | None:

@@ -73,7 +73,7 @@ def test_scores_of_passes_and_points():
 
 
 def test_priors_reorder_the_same_coarse_passes_and_do_not_lower_recall_or_raise_the_time():
-    from arproj.bench.scan import scan_and_map
+    from arproj.run.scan import scan_and_map
     from mapping.evaluate import evaluate
     from scanner.hard_walls import hard_case_wall
 
@@ -119,7 +119,7 @@ def test_a_cable_in_a_zone_is_traced_first(recorded):
 
 
 def test_a_known_socket_between_coarse_rows_is_searched_first_and_mapped(recorded):
-    from arproj.bench.scan import scan_and_map
+    from arproj.run.scan import scan_and_map
     from mapping.evaluate import area_recall, evaluate
 
     # a socket box between the rows at 0.25 and 0.5 m and between the columns: no coarse pass passes over it

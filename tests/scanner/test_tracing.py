@@ -38,7 +38,7 @@ def bent_wall() -> Wall:
 
 @pytest.fixture(scope="module")
 def traced(bent_wall: Wall):
-    from arproj.bench.scan import scan_and_map
+    from arproj.run.scan import scan_and_map
 
     return scan_and_map(bent_wall, "adaptive", 3)
 
@@ -116,7 +116,7 @@ def test_screws_on_a_steel_stud_between_coarse_rows_are_found_as_fasteners(stud_
     # in the overlap (x 0.35..0.40) the stud is cut by both frames' reach: the planner takes the cut peak's top.
     # A shallow screw saturates the display over 3 cm of a steel stud: mapping takes that top's middle (without
     # it, 1 and 0 of the 4 are found)
-    from arproj.bench.scan import scan_and_map
+    from arproj.run.scan import scan_and_map
     from mapping.evaluate import fastener_recall
 
     wall = _stud_wall(stud_x)

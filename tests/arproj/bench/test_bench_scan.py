@@ -8,7 +8,8 @@ import json
 import pytest
 
 from arproj.bench import BenchTable
-from arproj.bench.scan import COLUMNS, PLANS, PlanStats, _headline, _row, _score, scan_and_map
+from arproj.bench.scan import COLUMNS, PLANS, PlanStats, _headline, _row, _score
+from arproj.run.scan import scan_and_map
 from mapping.evaluate import evaluate, evaluate_measured
 from scanner.wall import Wall, wall_from_dict
 

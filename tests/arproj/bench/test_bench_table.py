@@ -66,3 +66,22 @@ def test_a_quick_run_says_its_targets_are_only_indicative() -> None:
         table.print()
     text = " ".join(captured.get().split())  # the title may wrap
     assert "indicative" in text and "judged on the full run" in text
+
+
+def test_a_row_dataclass_gives_the_columns_and_cells_in_field_order() -> None:
+    from dataclasses import dataclass
+
+    from arproj.bench import cells, column, columns
+
+    @dataclass
+    class Row:
+        case: str = column("case")
+        mean_mm: float = column("mean mm", float("nan"))
+        note: str = column("note", "")
+        distance_m: float = 0.0  # for the headline only: not a column
+
+    assert columns(Row) == ["case", "mean mm", "note"]
+    table = BenchTable(name="t", title="t", columns=columns(Row), rows=[cells(Row("2 m", note="closed",
+                                                                                distance_m=2.0))])
+    (case, mean, note), = json.loads(table.to_json())["rows"]
+    assert (case, note) == ("2 m", "closed") and mean != mean  # NaN: the default

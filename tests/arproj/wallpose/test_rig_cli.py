@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from arproj.cli.wallpose import _head_angles, run_wallpose
+from arproj.run.wallpose import WallposeSettings, parse_head_angles, run_wallpose
 from arproj.wallpose.rig import ViewRig
 from arproj.wallpose.synthetic import default_views
 from geometry.errors import InputError
@@ -30,8 +30,8 @@ def test_view_rig_from_a_calibrated_rig_folder(tmp_path) -> None:
 
 def test_cli_refuses_unclear_input(tmp_path) -> None:
     with pytest.raises(InputError, match="--sim"):
-        run_wallpose(False, 2.0, 0.0, 0, None, None, None, None, None, tmp_path / "p.png")
+        run_wallpose(WallposeSettings(picture=tmp_path / "p.png"))
     with pytest.raises(InputError, match="three numbers"):
-        _head_angles("0,a,1")
+        parse_head_angles("0,a,1")
     with pytest.raises(InputError, match="pan, tilt and roll"):
-        _head_angles("0,1")
+        parse_head_angles("0,1")

@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from arproj.session.cli_run import SessionOptions, run_session
+from arproj.run.project import SessionOptions, run_session
 from geometry import Intrinsics
 from geometry.errors import InputError
 from geometry.rig import Rig

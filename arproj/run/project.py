@@ -14,7 +14,7 @@ from arproj.session.output import BeamerWindow, FileOutput, MemoryOutput
 from arproj.session.wallmap import WallMap, load_wall_map, wall_map_from_wall_file
 from devices.errors import DeviceError
 from devices.pelco_d import PanTiltHead
-from devices.sim import HeadFaults, HeadSimulator
+from devices.sim import HeadFaults
 from geometry.errors import InputError
 from geometry.rig import Rig
 
@@ -137,10 +137,8 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
                     "run `arproj calibrate --sim --out RIG` and pass --rig RIG for a calibrated rig")
             check_rig_matches(rig, {"camera_left": site.camera_left, "camera_right": site.camera_right,
                                     "projector": site.projector})
-            head_sim = HeadSimulator(faults=_head_faults(options.head_fault), seed=options.seed,
-                                     initial_deg=tuple(float(a) for a in site.head_angles_cmd_deg[:2]))
-            head = PanTiltHead(head_sim.url, timeout_s=0.1, retries=3, settle_timeout_s=3.0)
-            robot = SimulatedRobot(site, options.wall_index, head_sim, head, multi)
+            robot = SimulatedRobot.on_site(site, options.wall_index, multi, seed=options.seed,
+                                           head_faults=_head_faults(options.head_fault), timeout_s=0.1)
         else:
             if rig is None:
                 raise InputError("no rig given", "pass --rig RIG_DIR (from `arproj calibrate`), or --sim")

@@ -1,0 +1,100 @@
+"""Scans on the simulated site, as `arproj scan`, `arproj demo` and the benchmarks run them.
+
+The scan itself is `scanner.run.run_scan`; what is set up around it here — the wall by file or shipped name,
+the settings a new log records and a resumed one restores, the device simulators (or the in-process site) — was
+written out again by each of those callers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from geometry.errors import InputError
+from mapping.pipeline import MapResult, ScanData, build_map
+from scanner.log import ScanLog
+from scanner.plan import DriveConfig, make_planner
+from scanner.run import DirectBackend, ProgressFn, ScanResult, config_from_meta, run_scan, scan_meta, simulated_site
+from scanner.sensor_model import SensorConfig
+from scanner.wall import Wall, load_wall, shipped_walls
+
+
+def resolve_wall(wall: str | Path) -> tuple[Wall, Path]:
+    """The wall file, or a shipped wall by its name (e.g. `paper_test_plate`), loaded and checked; returns the
+    wall and its path as found. InputError names what is wrong."""
+    path = Path(wall)
+    if not path.exists() and path.parent == Path() and path.stem in shipped_walls():
+        path = shipped_walls()[path.stem]
+    if not path.exists():
+        raise InputError(f"--wall {wall}: no such file",
+                         f"pass a wall file (YAML) or a shipped wall: {', '.join(sorted(shipped_walls()))}")
+    return load_wall(path), path
+
+
+@dataclass
+class ScanSettings:
+    """How a scan on the simulated site runs. A log records all but `serial` and `faults`."""
+
+    plan: str = "adaptive"                     # dense | adaptive (scanner.plan.make_planner)
+    plan_options: dict[str, Any] | None = None  # as make_planner takes them; None: the plan's defaults
+    seed: int = 0                              # robot errors, sensor noise (and injected faults)
+    serial: bool = True   # through the GRBL and wall-scanner simulators over socket:// (the hardware's code
+    #                       path); False: the site evaluated in-process (the same samples, faster)
+    faults: float = 0.0   # serial only: probability of a fault per device output line
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    drives: DriveConfig = field(default_factory=DriveConfig)
+
+    @classmethod
+    def from_log(cls, meta: dict[str, Any], path: str | Path) -> ScanSettings:
+        """The settings a simulated scan's log was made with (to resume it); InputError for a hardware log."""
+        if meta.get("seed") is None:
+            raise InputError(f"{path}: the log was not made on the simulated site; resuming hardware scans "
+                             "needs the devices' URLs, which this command does not take yet")
+        sensor, drives = config_from_meta(meta)
+        return cls(plan=meta["plan"]["kind"], plan_options=meta["plan"], seed=int(meta["seed"]), sensor=sensor,
+                   drives=drives)
+
+
+@dataclass
+class SimulatedScan:
+    result: ScanResult
+    faults_injected: int = 0    # serial: faults the device simulators injected …
+    faults_recovered: int = 0   # … and those the device backend recovered from
+
+
+def new_scan_log(path: str | Path, wall: Wall, wall_source: str, settings: ScanSettings,
+                 overwrite: bool = False) -> ScanLog:
+    """A new log for a simulated scan with `settings`; the plan's reach is checked before the file is made."""
+    planner = make_planner(settings.plan, wall, settings.drives, settings.sensor.hysteresis_m,
+                           settings.plan_options)
+    planner.frames()
+    return ScanLog.create(path, scan_meta(wall, wall_source, planner.describe(), settings.sensor, settings.drives,
+                                         settings.seed, simulated=True), overwrite=overwrite)
+
+
+def scan_simulated(wall: Wall, settings: ScanSettings, log: ScanLog | None = None,
+                   progress: ProgressFn | None = None) -> SimulatedScan:
+    """Scan `wall` on the simulated site; every pass goes to `log` if given (resuming from what it holds)."""
+    world, robot = simulated_site(wall, settings.sensor, settings.drives, settings.seed)
+    options: dict[str, Any] = {"plan_kind": settings.plan, "plan_options": settings.plan_options,
+                               "sensor": settings.sensor, "drives": settings.drives, "log": log, "progress": progress}
+    if not settings.serial:
+        return SimulatedScan(run_scan(wall, DirectBackend(world), robot, **options))
+    from devices.sim import FaultConfig
+    from scanner.hardware import simulated_devices
+
+    with simulated_devices(world, FaultConfig(rate=settings.faults, seed=settings.seed)) as (backend, g, s):
+        result = run_scan(wall, backend, robot, **options)
+        return SimulatedScan(result, sum((g.faults.counts + s.faults.counts).values()), backend.faults_recovered)
+
+
+def scan_and_map(wall: Wall, plan: str, seed: int, options: dict[str, Any] | None = None
+                 ) -> tuple[ScanResult, MapResult]:
+    """Scan `wall` with `plan` and its `options` (in-process site, no log) and map it as `arproj map` does."""
+    settings = ScanSettings(plan=plan, plan_options=options, seed=seed, serial=False)
+    scan = scan_simulated(wall, settings).result
+    meta = scan_meta(wall, wall.source, {"kind": plan, **(options or {})}, settings.sensor, settings.drives, seed,
+                     True)
+    data = ScanData.from_scan(f"{plan} scan of {wall.name}", scan.samples, scan.frames, meta)
+    return scan, build_map(data)
