@@ -119,7 +119,6 @@ def _homography(T_wall_from_projector: np.ndarray, intr: object, raster: object)
 
 
 def run(quick: bool = False, seed: int = 0) -> BenchTable:
-    from arproj.gl import create_context
     from arproj.session.evaluate import true_landing_errors
     from arproj.session.output import MemoryOutput
     from arproj.session.robot_io import SimulatedRobot, nominal_rig
@@ -128,6 +127,7 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
     from arproj.sim.site import Site
     from devices.pelco_d import PanTiltHead
     from devices.sim import HeadSimulator
+    from render.gl import create_context
     from scanner.wall import random_wall
 
     notes: list[str] = []
@@ -223,7 +223,7 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
     for o in [o for o in outcomes if o.unsafe][:8]:
         notes.append(f"UNSAFE: {o.kind} ({o.magnitude}): true max {1000 * o.true_max_m:.1f} mm, map shown")
     notes += [
-        f"rig 'calibrated': {rig_source}, with the full wall pose measured (arproj.wallpose: plane from the "
+        f"rig 'calibrated': {rig_source}, with the full wall pose measured (wallpose: plane from the "
         "projected pattern + localization + floor + laser scan of the room); rig 'design+truth': the robot's "
         "design values with the wall's in-plane position (along, height, rotation about the normal) from the "
         "simulated truth — it isolates the projection from calibration and wall-pose errors",
@@ -270,9 +270,9 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
 def _degraded(bases: list[dict], n: int, seed: int) -> list[scenarios.Outcome]:
     """n seeded scenarios over the registered bases: robot moved, pattern occluded, head slipped, wrong rig."""
     from arproj.session import gate
-    from arproj.wallpose.estimate import estimate_plane
-    from arproj.wallpose.rig import ViewRig
     from geometry.errors import InputError
+    from wallpose.estimate import estimate_plane
+    from wallpose.rig import ViewRig
 
     if not bases:
         return []
