@@ -7,7 +7,7 @@ finished ones, so `--resume` skips them and an interrupted run loses nothing):
     map          scan log → stitched frames → grids → objects (mapping) → map/ (map.png, signals.png, …)
     mesh         range images of the simulated site → measured wall surface → textured map/wall.glb
     calibrate    the calibration wizard's simulated procedure → rig/ (rig.yaml, camera_info files)
-    wall pose    projected pattern, both cameras → wall plane and projector pose (arproj.wallpose)
+    wall pose    projected pattern, both cameras → wall plane and projector pose (wallpose)
     pre-warp     the projection session's frame: the map pre-warped for the beamer, closed loop, safety gate
     photograph   the simulated camera photographs the wall with that frame projected on it (paper fig. 16)
 
@@ -248,10 +248,10 @@ def stage_map(ctx: DemoContext) -> None:
 
 def stage_mesh(ctx: DemoContext) -> None:
     """Range images of the wall → merged surface mesh in the wall frame → textured wall.glb (and a view of it)."""
-    from arproj.render import MeshRenderer
     from arproj.session.wallmap import load_wall_map
     from mapping.export import write_wall_glb
     from mapping.surface import wall_mesh_from_range_images
+    from render import MeshRenderer
 
     _, result = ctx.map_data()
     site = ctx.site()

@@ -10,5 +10,4 @@ command line (arproj/wizard, arproj/cli/calibrate.py) drive it with files, devic
     projector.py     Gray code decoding, Moreno & Taubin local homographies, projector as inverse camera
     head.py          pan/tilt/roll head model fit from projector poses at commanded angles
     validation.py    projected grids, measured landing points vs the calibration's prediction
-    synthetic.py     exact renderings of boards/walls lit by a projector, for tests and benchmarks
 """

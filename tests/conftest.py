@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.support.gl import gl_error
+
 REPO = Path(__file__).resolve().parent.parent
 
 
@@ -28,8 +30,8 @@ def shared_data() -> Path:
 
 @pytest.fixture(scope="session")
 def gl_context() -> Iterator[object]:
-    """One EGL context for the whole session (llvmpipe is enough), released at the end."""
-    from arproj.gl import create_context
+    """One EGL context for the whole session (llvmpipe is enough), made by the one factory, released at the end."""
+    from render.gl import create_context
 
     ctx = create_context()
     yield ctx
@@ -45,12 +47,13 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 @pytest.fixture(autouse=True)
 def _gl_error_free(request: pytest.FixtureRequest) -> Iterator[None]:
-    """Around every test that uses the GL context: no GL error before it (a clean start) or after it, as
-    moderngl's own suite checks."""
-    if "gl_context" not in request.fixturenames:
+    """Around every GL test (marker `gl`): no GL error on the session's context before it (a clean start) or
+    after it, as moderngl's own suite checks. Contexts a command makes for itself (the demo, `arproj project
+    --sim`, sites built without ctx) are not seen here."""
+    if request.node.get_closest_marker("gl") is None:
         yield
         return
     ctx = request.getfixturevalue("gl_context")
-    assert ctx.error == "GL_NO_ERROR", "a GL error was left by an earlier test"
+    assert gl_error(ctx) == "GL_NO_ERROR", "a GL error was left by an earlier test"
     yield
-    assert ctx.error == "GL_NO_ERROR", f"{request.node.name} left a GL error"
+    assert gl_error(ctx) == "GL_NO_ERROR", f"{request.node.name} left a GL error"

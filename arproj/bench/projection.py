@@ -179,8 +179,8 @@ class GateFigures(NamedTuple):
 
 
 def run(quick: bool = False, seed: int = 0) -> BenchTable:
-    from arproj.gl import create_context
     from arproj.session.wallmap import wall_map_from_wall
+    from render.gl import create_context
     from scanner.wall import random_wall
 
     notes: list[str] = []
@@ -300,7 +300,7 @@ def _gate_figures(outcomes: list[scenarios.Outcome], notes: list[str]) -> GateFi
 
 def _notes(rig_source: str, latency: Latency, gate: GateFigures) -> list[str]:
     return [
-        f"rig 'calibrated': {rig_source}, with the full wall pose measured (arproj.wallpose: plane from the "
+        f"rig 'calibrated': {rig_source}, with the full wall pose measured (wallpose: plane from the "
         "projected pattern + localization + floor + laser scan of the room); rig 'design+truth': the robot's "
         "design values with the wall's in-plane position (along, height, rotation about the normal) from the "
         "simulated truth — it isolates the projection from calibration and wall-pose errors",
@@ -356,9 +356,9 @@ class WrongRig(NamedTuple):
 def _degraded(bases: list[Base], n: int, seed: int) -> list[scenarios.Outcome]:
     """n seeded scenarios over the registered bases: robot moved, pattern occluded, head slipped, wrong rig."""
     from arproj.session import gate
-    from arproj.wallpose.estimate import estimate_plane
-    from arproj.wallpose.rig import ViewRig
     from geometry.errors import InputError
+    from wallpose.estimate import estimate_plane
+    from wallpose.rig import ViewRig
 
     if not bases:
         return []

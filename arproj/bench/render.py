@@ -13,10 +13,10 @@ import trimesh
 
 from arproj.bench import BenchTable, cells, column, columns
 from arproj.console import progress_bar
-from arproj.render import MeshRenderer
-from arproj.render.sample_wall import sample_wall_mesh
 from geometry import Intrinsics, look_at
 from geometry.poses import T_GL_FROM_CV
+from render import MeshRenderer
+from render.sample_wall import sample_wall_mesh
 
 TARGET_SPEEDUP = 5.0
 TARGET_FPS_1280 = 30.0

@@ -15,11 +15,11 @@ import numpy as np
 
 from arproj.bench import BenchTable, cells, column, columns
 from arproj.console import progress_bar
-from arproj.wallpose.baseline import SquarePattern, estimate_plane_baseline
-from arproj.wallpose.estimate import estimate_plane
-from arproj.wallpose.evidence import NotEnoughEvidenceError
-from arproj.wallpose.pattern import choose_pattern
-from arproj.wallpose.simtrial import LARGE_ROOM, calibrated_views, photograph_pair, true_landing, wall_truth
+from arproj.sim.wallpose_trial import LARGE_ROOM, calibrated_views, photograph_pair, true_landing, wall_truth
+from wallpose.baseline import SquarePattern, estimate_plane_baseline
+from wallpose.estimate import estimate_plane
+from wallpose.evidence import NotEnoughEvidenceError
+from wallpose.pattern import choose_pattern
 
 DISTANCES_M = (1.0, 2.0, 3.0, 4.0)
 INCIDENCES_DEG = (0.0, 30.0, 45.0, 60.0)
@@ -108,8 +108,8 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
 
 def _experiment(trials: int, seed: int) -> list[PoseRow]:
     """`trials` seeded placements at every distance × incidence, both estimates from the same photos' site."""
-    from arproj.gl import create_context
     from arproj.sim import Site
+    from render.gl import create_context
 
     rng = np.random.default_rng(seed)
     rows = []

@@ -124,8 +124,8 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
     multi = MultiOutput(outputs, say)
     try:
         if options.sim:
-            from arproj.gl import create_context
             from arproj.sim.site import Site
+            from render.gl import create_context
 
             ctx = create_context()
             site = Site.build(seed=options.seed, ctx=ctx, robot={"distance_m": options.distance,

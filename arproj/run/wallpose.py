@@ -84,17 +84,17 @@ class WallposeSettings:
 def run_wallpose(settings: WallposeSettings) -> dict:
     """Everything `arproj wallpose` does; returns the figures it prints."""
     s = settings
-    from arproj.wallpose.detect import detect
-    from arproj.wallpose.estimate import estimate_from_detections
-    from arproj.wallpose.pattern import choose_pattern
-    from arproj.wallpose.rig import ViewRig
+    from wallpose.detect import detect
+    from wallpose.estimate import estimate_from_detections
+    from wallpose.pattern import choose_pattern
+    from wallpose.rig import ViewRig
 
     if not s.sim and s.rig is None:
         raise InputError("no rig given", "pass --sim for the simulated site, or --rig FOLDER --head PAN,TILT,ROLL")
     site = None
     if s.sim:
         from arproj.sim import Site
-        from arproj.wallpose.simtrial import LARGE_ROOM, calibrated_views, photograph_pair
+        from arproj.sim.wallpose_trial import LARGE_ROOM, calibrated_views, photograph_pair
 
         room = {**LARGE_ROOM, "walls": {1: {"albedo": SIM_SIDE_WALL_ALBEDO}, 3: {"albedo": SIM_SIDE_WALL_ALBEDO}}}
         site = Site.build(seed=s.seed, room=room)
@@ -139,17 +139,17 @@ def run_wallpose(settings: WallposeSettings) -> dict:
                  f"{est.corners} corners, noise {est.sigma_px:.3f} px"]
         edge_points: list[np.ndarray] = []
         if site is not None:
-            from arproj.wallpose.edges import camera_images
-            from arproj.wallpose.pose import RoomMap, estimate_wall_pose
-            from arproj.wallpose.simtrial import true_landing, wall_truth
+            from arproj.sim.wallpose_trial import room_map, true_landing, wall_truth
             from geometry.poses import invert, rotation_angle_deg
+            from wallpose.edges import camera_images
+            from wallpose.pose import estimate_wall_pose
 
             truth = wall_truth(site)
             centre = true_landing(site, pattern.centre_px[None])[0]
             result["truth"] = {"normal_error_deg": round(est.normal_error_deg(truth.normal), 5),
                                "distance_error_mm": round(1000 * abs(est.offset_at(centre)), 4)}
             T_robot_from_projector = views.T_robot_from_camera_left @ est.T_camera_left_from_projector
-            pose = estimate_wall_pose(est, 0, RoomMap.from_site(site), site.localized_T_room_from_robot,
+            pose = estimate_wall_pose(est, 0, room_map(site), site.localized_T_room_from_robot,
                                       T_robot_from_projector, site.laser_scan().points_robot(),
                                       camera_images=camera_images(views, image_l, image_r), projector=views.projector)
             T_true = invert(site.walls[0].T_room_from_wall) @ site.T_room_from_robot

@@ -13,11 +13,11 @@ import trimesh
 from numpy.typing import ArrayLike, NDArray
 from PIL import Image
 
-from arproj.render import MeshRenderer
 from arproj.session import overlays
 from arproj.session import tolerances as tol
 from arproj.session.wallmap import WallMap
 from geometry.intrinsics import Intrinsics
+from render import MeshRenderer
 
 SIGMA_QUANTUM_M = 0.0005  # bands are redrawn when the registration σ changes by this much, not every frame
 CHECK_MARK_RADIUS_M = 0.008

@@ -2,7 +2,7 @@
 in it, the expected error on the wall, and the closed loop (check marks photographed and triangulated).
 
 Conventions: T_wall_from_robot maps robot points into the wall frame (x along the wall, y up, z into the
-room); the plane estimate (arproj.wallpose) gives the wall's normal and distance in the robot frame and the
+room); the plane estimate (wallpose) gives the wall's normal and distance in the robot frame and the
 projector's measured pose T_camera_left_from_projector.
 """
 

@@ -103,10 +103,10 @@ class SimulatedRobot:
         estimate (plane + localization + floor + laser), or None when the in-plane part comes from truth."""
         if self.prior != "measured":
             return None
-        from arproj.wallpose.pose import RoomMap
+        from arproj.sim.wallpose_trial import room_map
 
         r = self.site.scene["robot"]  # type: ignore[attr-defined]
-        return (RoomMap.from_site(self.site), self.wall_index, self.site.localized_T_room_from_robot,  # type: ignore
+        return (room_map(self.site), self.wall_index, self.site.localized_T_room_from_robot,  # type: ignore
                 float(r["localization_sigma_m"]), float(r["localization_sigma_deg"]))
 
     def wall_prior(self) -> tuple[NDArray[np.float64], float, str]:

@@ -26,15 +26,15 @@ from arproj.session import tolerances as tol
 from arproj.session.projection import MapProjector
 from arproj.session.robot_io import RobotIO
 from arproj.session.wallmap import WallMap
-from arproj.wallpose.edges import camera_images
-from arproj.wallpose.estimate import PlaneEstimate, Uncertainty, estimate_plane
-from arproj.wallpose.pattern import choose_pattern
-from arproj.wallpose.pose import estimate_wall_pose
-from arproj.wallpose.rig import ViewRig
 from devices.errors import DeviceError
 from geometry.errors import InputError
 from geometry.poses import invert, make_pose, transform_points
 from geometry.rig import Rig
+from wallpose.edges import camera_images
+from wallpose.estimate import PlaneEstimate, Uncertainty, estimate_plane
+from wallpose.pattern import choose_pattern
+from wallpose.pose import estimate_wall_pose
+from wallpose.rig import ViewRig
 
 HEAD_MOVED_DEG = 0.005  # reported angles that differ by more than this since the estimate: re-estimate
 CLOSED_LOOP_MARKS = 48  # check marks per closed-loop frame

@@ -22,10 +22,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 import shaders
-from arproj.render.projection import projection_matrix, view_matrix
 from arproj.sim.room import KIND_TARGET, Surface, triangulate
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert
+from render.gl import release_framebuffer
+from render.projection import projection_matrix, view_matrix
 
 # Flip NDC y so the framebuffer's first row is the image's top row.
 _IMAGE_ROWS_DOWN = np.diag([1.0, -1.0, 1.0, 1.0])
@@ -87,6 +88,13 @@ def _collect_garbage(ctx: moderngl.Context) -> None:
         release = getattr(obj, "release", None)
         if release is not None:
             release()
+
+
+def _release(obj: moderngl.Framebuffer | moderngl.Texture | moderngl.Renderbuffer) -> None:
+    if isinstance(obj, moderngl.Framebuffer):
+        release_framebuffer(obj)
+    else:
+        obj.release()
 
 
 def _vertex_array(ctx: moderngl.Context, program: moderngl.Program, vbo: moderngl.Buffer
@@ -186,7 +194,7 @@ class SceneRenderer:
         if self._shadow is None or self._shadow[1].size != (intr.width, intr.height):
             if self._shadow is not None:
                 for obj in self._shadow:
-                    obj.release()
+                    _release(obj)
             depth_tex = self.ctx.texture((intr.width, intr.height), 1, dtype="f4")
             depth_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
             depth_rb = self.ctx.depth_renderbuffer((intr.width, intr.height))
@@ -327,11 +335,11 @@ class SceneRenderer:
         self._deferred_vaos = []
         for objs in self._targets.values():
             for obj in dict.fromkeys(objs):      # the read fbo may be the drawing fbo
-                obj.release()
+                _release(obj)
         self._targets = {}
         if self._shadow is not None:
             for obj in self._shadow:
-                obj.release()
+                _release(obj)
             self._shadow = None
         if self._projector_texture is not None:
             self._projector_texture.release()

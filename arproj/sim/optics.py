@@ -5,7 +5,7 @@ defocus (a thin-lens blur circle c = aperture · f_px · |1/s − 1/z|, Gaussian
 blur per fragment from a few pre-blurred levels.
 
 Camera: radiance (cd/m²) and depth on the sensor grid (the renderer draws an enlarged pinhole, warped by the
-lens distortion of arproj.render.distortion) are blurred by lens and defocus, dimmed by cos⁴ vignetting,
+lens distortion of render.distortion) are blurred by lens and defocus, dimmed by cos⁴ vignetting,
 turned into electrons (exposure · responsivity · a fixed per-pixel response, PRNU), given shot and read
 noise, clipped at full well, gamma encoded and quantised to 8 bits.
 """
@@ -19,9 +19,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from arproj.render.distortion import DistortionMap, distortion_map, undistorted_directions
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
+from render.distortion import DistortionMap, distortion_map, undistorted_directions
 
 LUMA_RGB = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)   # Rec. 709 luminance weights
 BLUR_LEVEL_RATIO = 2.0            # successive blur levels differ by this factor in σ

@@ -26,7 +26,6 @@ import moderngl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from arproj.render.distortion import distortion_map
 from arproj.sim import optics
 from arproj.sim.gl_scene import ProjectorState, SceneRenderer
 from arproj.sim.robot import (
@@ -53,6 +52,7 @@ from geometry.errors import InputError
 from geometry.head import HeadModel
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, make_pose, transform_points
+from render.distortion import distortion_map
 
 CAMERAS = ("camera_left", "camera_right")
 MIN_CLEARANCE_M = 0.05       # cameras and projector must be this far inside the room
@@ -139,7 +139,7 @@ def shared_context() -> moderngl.Context:
     """One GL context for every site built without its own (created on first use, lives with the process)."""
     global _shared_ctx
     if _shared_ctx is None:
-        from arproj.gl import create_context
+        from render.gl import create_context
 
         _shared_ctx = create_context()
         # Sites that are dropped without release() queue their GPU objects; the renderer frees them (ctx.gc())

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from calibration.boards import detect, parse_board
-from calibration.synthetic import PlaneRenderer, chessboard_albedo
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import make_pose, rotation_about, transform_points
+from tests.support.synthetic_calibration import PlaneRenderer, chessboard_albedo
 
 CORNER_TOLERANCE_PX = 0.1  # noise 1 grey level, blur 0.6 px, 4x4 supersampled edges
 

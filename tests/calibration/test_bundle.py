@@ -17,10 +17,10 @@ from scipy.stats import chi2, norm
 from calibration.boards import parse_board
 from calibration.bundle import BA_TOLERANCE, BundleResult, Observation, bundle_adjust
 from calibration.camera_model import DISTORTION_MODELS
-from calibration.synthetic import board_poses
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import make_pose, pose_from_rvec_tvec, rotation_about, rvec_tvec_from_pose
+from tests.support.synthetic_calibration import board_poses
 
 CAM0 = Intrinsics(800.0, 806.0, 322.0, 236.0, 640, 480, (-0.15, 0.06, 0.0012, -0.0008, 0.0))
 CAM1 = Intrinsics(790.0, 793.0, 315.0, 245.0, 640, 480, (-0.12, 0.04, -0.0006, 0.0009, 0.0))

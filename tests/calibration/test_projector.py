@@ -14,10 +14,10 @@ from calibration.projector import (
     decode_gray_code,
     gray_code_patterns,
 )
-from calibration.synthetic import PlaneRenderer, board_poses, chessboard_albedo, plane_facing
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, look_at, rotation_angle_deg, transform_points
+from tests.support.synthetic_calibration import PlaneRenderer, board_poses, chessboard_albedo, plane_facing
 
 # No camera distortion: rendering then needs no per-pixel undistortion, which keeps the fixture fast.
 CAMERA = Intrinsics(470.0, 470.0, 241.0, 178.0, 480, 360)
@@ -121,8 +121,8 @@ def test_flat_wall_at_one_orientation_is_degenerate() -> None:
 def test_stereo_gray_code_path_recovers_projector_as_inverse_camera() -> None:
     """Gray code on a bare wall at four orientations, decoded in both cameras, triangulated, inverse camera."""
     from calibration.projector import wall_points_from_stereo
-    from calibration.synthetic import uniform_albedo
     from geometry.poses import make_pose
+    from tests.support.synthetic_calibration import uniform_albedo
 
     left = Intrinsics(300.0, 300.0, 159.5, 119.5, 320, 240)
     right = Intrinsics(305.0, 305.0, 161.0, 118.0, 320, 240)

@@ -7,10 +7,10 @@ import pytest
 
 from calibration.boards import BoardView, parse_board
 from calibration.stereo import calibrate_camera, calibrate_stereo
-from calibration.synthetic import board_poses
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import make_pose, rotation_about, rotation_angle_deg, transform_points
+from tests.support.synthetic_calibration import board_poses
 
 LEFT = Intrinsics(700.0, 702.0, 318.0, 243.0, 640, 480, (-0.2, 0.07, 0.001, -0.0005, 0.0))
 RIGHT = Intrinsics(695.0, 696.0, 325.0, 236.0, 640, 480, (-0.18, 0.05, -0.0008, 0.0004, 0.0))

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from arproj.bench.render import _untextured, oblique_pose, projector_intrinsics
-from arproj.render import MeshRenderer
-from arproj.render.sample_wall import sample_wall_mesh
 from geometry.poses import invert
+from render import MeshRenderer
+from render.sample_wall import sample_wall_mesh
 
 
 def test_untextured_wall_keeps_the_triangles_and_takes_each_vertex_colour_from_the_texture() -> None:

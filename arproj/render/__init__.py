@@ -1,5 +1,0 @@
-"""Offscreen rendering: OpenCV intrinsics and poses drawn with moderngl through one GL context factory."""
-
-from arproj.render.renderer import MeshRenderer, RenderResult
-
-__all__ = ["MeshRenderer", "RenderResult"]

@@ -1,0 +1,137 @@
+"""The product's layers, read from its import graph: data flows one way, and the libraries know no application.
+
+Layers, lowest first: geometry ← {scanner, calibration, wallpose, render, devices} ← mapping ← arproj. shaders is
+data (any package may load it; it imports none). A package imports from its own layer only along the sibling
+pairs listed below, which must stay acyclic. More checks over the same graph (module cycles, private names
+across modules) go beside these, reading tests.support.import_graph.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from tests.support.import_graph import (
+    Import,
+    find_cycle,
+    layer_violations,
+    package_edges,
+    product_imports,
+    read_imports,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+
+LAYERS: list[set[str]] = [
+    {"geometry"},
+    {"scanner", "calibration", "wallpose", "render", "devices"},
+    {"mapping"},
+    {"arproj"},
+]
+DATA = {"shaders"}
+# The libraries: packages beside arproj/ that the application uses and that know nothing of it.
+LIBRARIES = ("geometry", "calibration", "wallpose", "render", "devices")
+# Imports between packages of the same layer that the code has (importer, target); none may close a cycle.
+SIBLING_IMPORTS = {
+    ("scanner", "devices"),       # scanner.hardware and scanner.sim.devices drive the drives and the wall scanner
+    ("wallpose", "calibration"),  # wallpose.detect uses calibration.boards.as_gray
+}
+
+PACKAGES = sorted(set().union(*LAYERS) | DATA)
+
+
+@pytest.fixture(scope="module")
+def imports() -> list[Import]:
+    found = product_imports(ROOT, PACKAGES)
+    assert len(found) > 500  # the whole product was read, not an empty folder
+    return found
+
+
+def test_every_shipped_package_has_a_layer() -> None:
+    include = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]["find"]["include"]
+    shipped = {pattern.rstrip("*") for pattern in include}
+    assert shipped <= set(PACKAGES), f"give these packages a layer in {__file__}: {sorted(shipped - set(PACKAGES))}"
+
+
+def test_no_import_from_a_lower_layer_to_a_higher_one(imports: list[Import]) -> None:
+    problems = layer_violations(imports, LAYERS, SIBLING_IMPORTS, DATA)
+    assert not problems, "\n".join(problems)
+
+
+def test_libraries_import_nothing_from_the_application(imports: list[Import]) -> None:
+    from_app = [f"{i.where()}: {i.importer} imports {i.target}" for i in imports
+                if i.importer_package in LIBRARIES and i.target_package == "arproj"]
+    assert not from_app, "\n".join(from_app)
+
+
+def test_no_product_module_imports_the_tests(imports: list[Import]) -> None:
+    from_tests = [f"{i.where()}: {i.importer} imports {i.target}" for i in imports if i.target_package == "tests"]
+    assert not from_tests, "\n".join(from_tests)
+
+
+def test_the_allowed_sibling_imports_exist_and_are_acyclic(imports: list[Import]) -> None:
+    rank = {package: i for i, layer in enumerate(LAYERS) for package in layer}
+    assert all(rank[a] == rank[b] for a, b in SIBLING_IMPORTS)
+    stale = SIBLING_IMPORTS - package_edges(imports)
+    assert not stale, f"no longer imported, remove from SIBLING_IMPORTS: {sorted(stale)}"
+    assert find_cycle(SIBLING_IMPORTS) is None
+
+
+# ---- the checker itself, on small made-up modules ------------------------------------------------------------
+
+FAKE = Path("fake.py")
+
+
+def test_reader_resolves_relative_lazy_guarded_and_submodule_imports() -> None:
+    source = (
+        "from typing import TYPE_CHECKING\n"
+        "import geometry.poses, numpy as np\n"
+        "from . import limits\n"
+        "from ..render.gl import create_context\n"
+        "if TYPE_CHECKING:\n"
+        "    from arproj.sim import Site\n"
+        "def f():\n"
+        "    from mapping import fusion, build_map\n"
+    )
+    found = read_imports(source, "wallpose.pose", FAKE, modules={"wallpose.limits", "mapping.fusion"})
+    got = {(i.target, i.names, i.type_only) for i in found}
+    assert got == {("typing", ("TYPE_CHECKING",), False), ("geometry.poses", (), False), ("numpy", (), False),
+                   ("wallpose.limits", (), False), ("render.gl", ("create_context",), False),
+                   ("arproj.sim", ("Site",), True), ("mapping.fusion", (), False), ("mapping", ("build_map",), False)}
+    # a package's own relative import starts from the package itself
+    (init,) = read_imports("from .rig import ViewRig\n", "wallpose", FAKE, is_package=True)
+    assert init.target == "wallpose.rig"
+
+
+@pytest.mark.parametrize(("importer", "target", "complaint"), [
+    ("geometry.poses", "arproj.cli", "a higher layer"),
+    ("calibration.boards", "mapping.grid", "a higher layer"),
+    ("render.renderer", "scanner.wall", "a sibling"),
+    ("shaders", "render.gl", "is data"),
+])
+def test_checker_flags_a_wrong_import(importer: str, target: str, complaint: str) -> None:
+    (problem,) = layer_violations([Import(importer, target, (), FAKE, 3)], LAYERS, SIBLING_IMPORTS, DATA)
+    assert problem.startswith("fake.py:3: ") and complaint in problem
+
+
+@pytest.mark.parametrize(("importer", "target"), [
+    ("arproj.demo", "geometry.poses"), ("mapping.fusion", "scanner.wall"), ("wallpose.detect", "calibration.boards"),
+    ("render.renderer", "shaders"), ("geometry.poses", "numpy"), ("arproj.cli", "arproj.demo"),
+])
+def test_checker_passes_a_right_import(importer: str, target: str) -> None:
+    assert layer_violations([Import(importer, target, (), FAKE, 1)], LAYERS, SIBLING_IMPORTS, DATA) == []
+
+
+def test_checker_reads_a_tree_on_disk(tmp_path: Path) -> None:
+    (tmp_path / "geometry").mkdir()
+    (tmp_path / "geometry" / "__init__.py").write_text("")
+    (tmp_path / "geometry" / "poses.py").write_text("def f():\n    from arproj.cli import app\n")
+    found = product_imports(tmp_path, ["geometry", "missing"])
+    assert [p.split(": ")[0] for p in layer_violations(found, LAYERS)] == [str(Path("geometry/poses.py")) + ":2"]
+
+
+def test_find_cycle() -> None:
+    assert find_cycle({("a", "b"), ("b", "c")}) is None
+    assert find_cycle({("a", "b"), ("b", "c"), ("c", "a"), ("c", "d")}) == ["a", "b", "c", "a"]

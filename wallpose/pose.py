@@ -1,0 +1,272 @@
+"""The full wall pose: the plane from the cameras fixes 3 degrees of freedom (the normal's direction and the
+distance); the robot's localization, the floor it stands on and the 2-D laser scan of the room's walls (the
+side walls and room corner fix the position along the wall) fix the rest; where the wall's own edges (room
+corners, floor and ceiling lines) are in the cameras' view, their image lines do too (wallpose.edges).
+
+All are Gaussian measurements of one unknown, the robot's pose in the room, T_room_from_robot = T0 · exp(δ)
+with δ = (rotation vector, translation) in the robot frame around the localized pose T0; a few Gauss–Newton
+steps give δ and its covariance. T_wall_from_robot = inv(T_room_from_wall) · T_room_from_robot, so the same δ
+and covariance describe it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from geometry.errors import InputError
+from geometry.intrinsics import Intrinsics
+from geometry.poses import invert, make_pose, transform_points
+from wallpose import limits
+from wallpose.edges import CameraImage, EdgeObservation, Projector, find_wall_edges, project_undistorted
+from wallpose.estimate import PlaneEstimate
+from wallpose.evidence import NotEnoughEvidenceError
+from wallpose.plane import rotations
+
+POSE_ITERATIONS = 6
+LASER_GATES_M = (0.4, 0.15, limits.LASER_GATE_M)  # association gates, coarse to fine (localization can be off)
+CHI2_3_9999 = 21.1                                # the plane contradicts the map and localization beyond this
+
+
+@dataclass
+class WallPose:
+    """T_wall_from_robot and T_wall_from_projector (head at its current angles) with covariances (6, 6) of
+    δ = (rotation vector rad, translation m) in the robot (projector) frame: T_true ≈ T · exp(δ).
+
+    sigma_along_m / sigma_height_m / sigma_distance_m / sigma_normal_deg / sigma_roll_deg: 1-σ of the robot's
+    position along the wall, height, distance from it, its heading relative to the normal and rotation about
+    the normal, from the covariance; sources: which measurements were used; edges: the wall edges seen by the
+    cameras that were fused, edges_rejected: those found but not where the other measurements put them."""
+
+    T_wall_from_robot: NDArray[np.float64]
+    covariance: NDArray[np.float64]
+    T_wall_from_projector: NDArray[np.float64]
+    projector_covariance: NDArray[np.float64]
+    T_room_from_robot: NDArray[np.float64]
+    sigma_along_m: float
+    sigma_height_m: float
+    sigma_distance_m: float
+    sigma_normal_deg: float
+    sigma_roll_deg: float
+    sources: list[str] = field(default_factory=list)
+    edges: list[EdgeObservation] = field(default_factory=list)
+    edges_rejected: list[str] = field(default_factory=list)
+
+
+@dataclass
+class RoomMap:
+    """The room's walls (room frame): T_room_from_wall 4x4 each and their (width, height) in metres."""
+
+    T_room_from_walls: list[NDArray[np.float64]]
+    sizes_m: list[tuple[float, float]]
+
+
+def _exp(delta: NDArray[np.float64]) -> NDArray[np.float64]:
+    return make_pose(rotations(delta[None, :3])[0], delta[3:])
+
+
+def _plane_whitener(plane: PlaneEstimate) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Basis (3, 4) mapping a (normal, distance) difference to 3 independent numbers, and their whitener."""
+    n = plane.normal
+    e1 = np.cross(n, [0.0, 0.0, 1.0] if abs(n[2]) < 0.9 else [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    basis = np.zeros((3, 4))
+    basis[0, :3], basis[1, :3], basis[2, 3] = e1, e2, 1.0
+    cov = basis @ plane.covariance @ basis.T + np.eye(3) * 1e-16
+    return basis, np.linalg.inv(np.linalg.cholesky(cov))
+
+
+def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized_T_room_from_robot: NDArray,
+                       T_robot_from_projector: NDArray, laser_points_robot: NDArray | None = None,
+                       localization_sigma_m: float = 0.03, localization_sigma_deg: float = 1.0,
+                       projector_covariance: NDArray | None = None, *,
+                       camera_images: Sequence[CameraImage] | None = None,
+                       projector: Intrinsics | None = None) -> WallPose:
+    """Fuse the measured plane of wall `wall` with localization, floor and (optionally) a laser scan.
+
+    laser_points_robot: (n, 3) scan returns in the robot frame; T_robot_from_projector: the projector's pose
+    (e.g. T_robot_from_camera_left · plane.T_camera_left_from_projector, the measured one);
+    projector_covariance: (6, 6) of the projector pose relative to the robot, added to the result's;
+    camera_images: the photos (wallpose.edges.camera_images) in which to look for the wall's edges
+    (room corners, floor and ceiling lines) around where the other measurements put them; each edge found and
+    consistent with them adds its image line as a measurement; projector: its intrinsics, when it was on for the
+    photos (the stretches of an edge it lights are not searched).
+    Raises NotEnoughEvidenceError when the plane contradicts the map (the pattern is on another wall).
+    """
+    if not 0 <= wall < len(room.T_room_from_walls):
+        raise InputError(f"wall index {wall} is not in the room map (walls 0..{len(room.T_room_from_walls) - 1})")
+    T0 = np.asarray(localized_T_room_from_robot, dtype=np.float64)
+    T_wall_from_room = invert(room.T_room_from_walls[wall])
+    basis, whiten = _plane_whitener(plane)
+    measured = np.append(plane.normal, plane.distance)
+    sources = ["localization", "floor", "wall plane (cameras + projector)"]
+    walls_room = [(Tw[:3, 2], Tw[:3, 3], size) for Tw, size in zip(room.T_room_from_walls, room.sizes_m, strict=True)]
+    laser = None if laser_points_robot is None or len(laser_points_robot) == 0 \
+        else np.asarray(laser_points_robot, dtype=np.float64)
+    if laser is not None:
+        sources.append(f"laser scan ({len(laser)} returns)")
+
+    edge_block: list[tuple[EdgeObservation, NDArray[np.float64], Intrinsics, NDArray[np.float64]]] = []
+
+    def residuals(delta: NDArray[np.float64], gate: float) -> NDArray[np.float64]:
+        T = T0 @ _exp(delta)
+        out = [delta[[3, 4]] / localization_sigma_m, delta[[2]] / np.radians(localization_sigma_deg),
+               [T[2, 3] / limits.FLOOR_HEIGHT_SIGMA_M],
+               T[:2, 2] / np.radians(limits.FLOOR_TILT_SIGMA_DEG)]
+        T_robot_from_wall = invert(T_wall_from_room @ T)
+        n = T_robot_from_wall[:3, 2]
+        predicted = np.append(n, -n @ T_robot_from_wall[:3, 3])
+        out.append(whiten @ (basis @ (predicted - measured)))
+        if laser is not None:
+            p = laser @ T[:3, :3].T + T[:3, 3]
+            best = np.full(len(p), np.inf)
+            for normal, origin, (width, _) in walls_room:
+                dist = (p - origin) @ normal
+                along = (p - origin) @ np.cross([0.0, 0.0, 1.0], normal)
+                # only returns beside the wall's extent (a little beyond: corners) belong to it
+                inside = (along > -0.1) & (along < width + 0.1)
+                dist = np.where(inside, dist, np.inf)
+                best = np.where(np.abs(dist) < np.abs(best), dist, best)
+            use = np.abs(best) < gate
+            out.append(np.where(use, best, 0.0) / limits.LASER_RANGE_SIGMA_M)
+        for obs, T_robot_from_camera, intr, whitener in edge_block:
+            out.append(whitener @ _edge_offsets(obs, T @ T_robot_from_camera, intr))
+        return np.concatenate([np.ravel(o) for o in out])
+
+    def solve(delta: NDArray[np.float64], gates: Sequence[float]) -> tuple[NDArray[np.float64], NDArray]:
+        J = np.zeros((0, 6))
+        for gate in gates:
+            for _ in range(POSE_ITERATIONS):
+                r = residuals(delta, gate)
+                J = _numeric_jacobian(lambda d, gate=gate: residuals(d, gate), delta, r)
+                step = np.linalg.solve(J.T @ J, -(J.T @ r))
+                delta = delta + step
+                if np.linalg.norm(step) < 1e-10:
+                    break
+        return delta, J
+
+    _check_innovation(whiten, basis, measured, T0, T_wall_from_room, wall, localization_sigma_m,
+                      localization_sigma_deg)
+    gates = LASER_GATES_M if laser is not None else (np.inf,)
+    delta, J = solve(np.zeros(6), gates)
+    covariance = np.linalg.inv(J.T @ J)
+    rejected: list[str] = []
+    if camera_images:
+        cameras = {cam.name: cam for cam in camera_images}
+        lit = None if projector is None else Projector(projector, np.asarray(T_robot_from_projector, dtype=float))
+        found = find_wall_edges(list(camera_images), room.T_room_from_walls, room.sizes_m, wall, T0 @ _exp(delta),
+                                covariance, projector=lit)
+        for obs in found:
+            cam = cameras[obs.camera]
+            T_rc = np.asarray(cam.T_robot_from_camera, dtype=np.float64)
+            if _edge_innovation(obs, T0, delta, covariance, T_rc, cam.intrinsics) > limits.EDGE_CHI2_2_999:
+                rejected.append(f"{obs.edge} in {obs.camera}")
+                continue
+            edge_block.append((obs, T_rc, cam.intrinsics, np.linalg.inv(np.linalg.cholesky(obs.covariance))))
+        while edge_block:
+            delta_e, J_e = solve(delta, gates[-1:])
+            T_e = T0 @ _exp(delta_e)
+            # after fusing: an edge that still disagrees with everything else is dropped (and the rest refitted)
+            chi2 = [float(np.sum((W @ _edge_offsets(o, T_e @ T_rc, intr)) ** 2)) for o, T_rc, intr, W in edge_block]
+            worst = int(np.argmax(chi2))
+            if chi2[worst] <= limits.EDGE_CHI2_2_999:
+                delta, J = delta_e, J_e
+                covariance = np.linalg.inv(J.T @ J)
+                break
+            rejected.append(f"{edge_block[worst][0].edge} in {edge_block[worst][0].camera}")
+            del edge_block[worst]
+        if edge_block:
+            sources.append("camera edges (" + ", ".join(f"{o.edge} in {o.camera}" for o, *_ in edge_block) + ")")
+    T_room_from_robot = T0 @ _exp(delta)
+    T_wall_from_robot = T_wall_from_room @ T_room_from_robot
+    T_robot_from_projector = np.asarray(T_robot_from_projector, dtype=np.float64)
+    T_projector_from_robot = invert(T_robot_from_projector)
+    adjoint = _adjoint(T_projector_from_robot)
+    cov_projector = adjoint @ covariance @ adjoint.T
+    if projector_covariance is not None:
+        cov_projector = cov_projector + np.asarray(projector_covariance)
+    # 1-σ along the wall's axes: rotate the robot-frame translation covariance into the wall frame
+    R = T_wall_from_robot[:3, :3]
+    cov_t_wall = R @ covariance[3:, 3:] @ R.T
+    cov_r_wall = R @ covariance[:3, :3] @ R.T
+    return WallPose(
+        T_wall_from_robot=T_wall_from_robot, covariance=covariance,
+        T_wall_from_projector=T_wall_from_robot @ T_robot_from_projector, projector_covariance=cov_projector,
+        T_room_from_robot=T_room_from_robot,
+        sigma_along_m=float(np.sqrt(cov_t_wall[0, 0])), sigma_height_m=float(np.sqrt(cov_t_wall[1, 1])),
+        sigma_distance_m=float(np.sqrt(cov_t_wall[2, 2])),
+        sigma_normal_deg=float(np.degrees(np.sqrt(max(cov_r_wall[0, 0], cov_r_wall[1, 1])))),
+        sigma_roll_deg=float(np.degrees(np.sqrt(cov_r_wall[2, 2]))), sources=sources,
+        edges=[o for o, *_ in edge_block], edges_rejected=rejected)
+
+
+def _numeric_jacobian(f: Callable[[NDArray[np.float64]], NDArray[np.float64]], delta: NDArray[np.float64],
+                      f0: NDArray[np.float64], step: float = 1e-7) -> NDArray[np.float64]:
+    """(len(f0), 6) forward differences of f around the pose increment delta (f0 = f(delta))."""
+    J = np.empty((len(f0), len(delta)))
+    for k in range(len(delta)):
+        h = np.zeros(len(delta))
+        h[k] = step
+        J[:, k] = (f(delta + h) - f0) / step
+    return J
+
+
+def _edge_offsets(obs: EdgeObservation, T_room_from_camera: NDArray, intr: Intrinsics) -> NDArray[np.float64]:
+    """(2,) px: perpendicular distances of the seen stretch's two ends (3-D, from the map) from the image line
+    found, both in undistorted pixels (lens distortion is undone on the detected points instead)."""
+    uv = project_undistorted(intr, transform_points(invert(T_room_from_camera), obs.points_room))
+    return uv @ obs.line[:2] + obs.line[2]
+
+
+def _edge_innovation(obs: EdgeObservation, T0: NDArray, delta: NDArray, covariance: NDArray,
+                     T_robot_from_camera: NDArray, intr: Intrinsics) -> float:
+    """Mahalanobis² of an edge line against where the pose (δ, covariance) without it predicts it."""
+    def offsets(d: NDArray[np.float64]) -> NDArray[np.float64]:
+        return _edge_offsets(obs, T0 @ _exp(d) @ T_robot_from_camera, intr)
+
+    z = offsets(delta)
+    G = _numeric_jacobian(offsets, delta, z)
+    S = obs.covariance + G @ covariance @ G.T
+    return float(z @ np.linalg.solve(S, z))
+
+
+def _predicted_plane(T_room_from_robot: NDArray, T_wall_from_room: NDArray) -> NDArray[np.float64]:
+    """(normal, distance) of the wall in the robot frame for a robot pose."""
+    T_robot_from_wall = invert(T_wall_from_room @ T_room_from_robot)
+    n = T_robot_from_wall[:3, 2]
+    return np.append(n, -n @ T_robot_from_wall[:3, 3])
+
+
+def _check_innovation(whiten: NDArray, basis: NDArray, measured: NDArray, T0: NDArray,
+                      T_wall_from_room: NDArray, wall: int, sigma_m: float, sigma_deg: float) -> None:
+    """Before fusing: is the measured plane where the map and the localization expect that wall to be?"""
+    z0 = basis @ (_predicted_plane(T0, T_wall_from_room) - measured)
+    G = np.empty((3, 6))
+    for k in range(6):
+        h = np.zeros(6)
+        h[k] = 1e-7
+        G[:, k] = (basis @ (_predicted_plane(T0 @ _exp(h), T_wall_from_room) - measured) - z0) / 1e-7
+    tilt = np.radians(limits.FLOOR_TILT_SIGMA_DEG)
+    prior = np.diag([tilt, tilt, np.radians(sigma_deg), sigma_m, sigma_m, limits.FLOOR_HEIGHT_SIGMA_M]) ** 2
+    cov_z = np.linalg.inv(whiten.T @ whiten)
+    S = cov_z + G @ prior @ G.T
+    d2 = float(z0 @ np.linalg.solve(S, z0))
+    if d2 > CHI2_3_9999:
+        raise NotEnoughEvidenceError("no_wall_frame", f"the measured plane is not where wall {wall} of the map "
+                                     f"should be by the robot's localization (Mahalanobis² {d2:.0f})",
+                                     "is the pattern on that wall? check the room map and the localization")
+
+
+def _adjoint(T: NDArray[np.float64]) -> NDArray[np.float64]:
+    """6x6 adjoint of T for (rotation, translation)-ordered right perturbations: exp(Ad·δ) = T exp(δ) T⁻¹."""
+    R, t = T[:3, :3], T[:3, 3]
+    tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
+    A = np.zeros((6, 6))
+    A[:3, :3] = R
+    A[3:, 3:] = R
+    A[3:, :3] = tx @ R
+    return A
