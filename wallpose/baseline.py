@@ -117,10 +117,10 @@ def square_corners(image: NDArray[np.uint8], camera_name: str = "camera") -> NDA
     angles = np.arctan2(quad[:, 1] - centre[1], quad[:, 0] - centre[0])
     quad = quad[np.argsort(angles)]              # image y down: increasing angle runs clockwise on screen
     start = int(np.argmin(quad.sum(axis=1)))      # top-left first
-    quad = np.roll(quad, -start, axis=0).astype(np.float32).reshape(-1, 1, 2)
-    cv2.cornerSubPix(gray, quad, (SUBPIX_HALF_WINDOW, SUBPIX_HALF_WINDOW), (-1, -1),
+    quad_px = np.roll(quad, -start, axis=0).astype(np.float32).reshape(-1, 1, 2)
+    cv2.cornerSubPix(gray, quad_px, (SUBPIX_HALF_WINDOW, SUBPIX_HALF_WINDOW), (-1, -1),
                      (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
-    return quad.reshape(4, 2).astype(np.float64)
+    return quad_px.reshape(4, 2).astype(np.float64)
 
 
 def estimate_plane_baseline(image_left: NDArray[np.uint8], image_right: NDArray[np.uint8],

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -142,7 +143,7 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
         for gate in gates:
             for _ in range(POSE_ITERATIONS):
                 r = residuals(delta, gate)
-                J = _numeric_jacobian(lambda d, gate=gate: residuals(d, gate), delta, r)
+                J = _numeric_jacobian(partial(residuals, gate=gate), delta, r)
                 step = np.linalg.solve(J.T @ J, -(J.T @ r))
                 delta = delta + step
                 if np.linalg.norm(step) < 1e-10:
