@@ -24,7 +24,7 @@ from geometry.poses import invert, make_pose, transform_points
 from wallpose import limits
 from wallpose.edges import CameraImage, EdgeObservation, Projector, find_wall_edges, project_undistorted
 from wallpose.estimate import PlaneEstimate
-from wallpose.evidence import NotEnoughEvidenceError
+from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
 from wallpose.plane import rotations
 
 POSE_ITERATIONS = 6
@@ -257,7 +257,8 @@ def _check_innovation(whiten: NDArray, basis: NDArray, measured: NDArray, T0: ND
     S = cov_z + G @ prior @ G.T
     d2 = float(z0 @ np.linalg.solve(S, z0))
     if d2 > CHI2_3_9999:
-        raise NotEnoughEvidenceError("no_wall_frame", f"the measured plane is not where wall {wall} of the map "
+        raise NotEnoughEvidenceError(EvidenceCode.NO_WALL_FRAME,
+                                     f"the measured plane is not where wall {wall} of the map "
                                      f"should be by the robot's localization (Mahalanobis² {d2:.0f})",
                                      "is the pattern on that wall? check the room map and the localization")
 
