@@ -48,6 +48,9 @@ class RobotIO(Protocol):
     def close(self) -> None: ...
 
 
+TRUTH_PRIOR = "sim truth (in-plane)"  # SimulatedRobot.wall_prior's source with prior="truth"
+
+
 class SimulatedRobot:
     """The simulated site as the session's robot. The head is commanded over Pelco-D to a HeadSimulator; the
     site's head then moves to the simulator's physical angles (its own bias, noise and backlash on top).
@@ -116,7 +119,7 @@ class SimulatedRobot:
     def wall_prior(self) -> tuple[NDArray[np.float64], float, str]:
         T_wall_from_room = invert(self.wall.T_room_from_wall)
         if self.prior == "truth":
-            return T_wall_from_room @ self.site.T_room_from_robot, 0.0, "sim truth (in-plane)"
+            return T_wall_from_room @ self.site.T_room_from_robot, 0.0, TRUTH_PRIOR
         sigma = float(self.site.scene["robot"]["localization_sigma_m"])
         return T_wall_from_room @ self.site.localized_T_room_from_robot, sigma, "localization"
 
