@@ -94,6 +94,11 @@ class DemoContext:
     def out(self) -> Path:
         return self.options.out
 
+    @property
+    def design_rig_used(self) -> bool:
+        """The projection stages use the robot's design values: the calibrated rig failed in the wall pose."""
+        return self.figures.get("wall pose", {}).get("rig used") == DESIGN_RIG
+
     def picture(self, file: str, caption: str, stage: str) -> None:
         self.pictures = [p for p in self.pictures if p["file"] != file]
         self.pictures.append({"file": file, "caption": caption, "stage": stage})
@@ -150,7 +155,7 @@ class DemoContext:
             from geometry.rig import Rig
 
             site = self.site()
-            if self.figures.get("wall pose", {}).get("rig used") == DESIGN_RIG:
+            if self.design_rig_used:
                 from arproj.session.robot_io import nominal_rig
 
                 rig = nominal_rig(site)

@@ -72,9 +72,9 @@ class Board:
         s = int(pixels_per_square)
         m = round(margin_squares * s)
         if self.kind == "charuco":
-            img = self.charuco_board().generateImage((self.cols * s + 2 * m, self.rows * s + 2 * m),
-                                                     marginSize=m)
-            return img
+            charuco = self.charuco_board().generateImage((self.cols * s + 2 * m, self.rows * s + 2 * m),
+                                                         marginSize=m)
+            return np.asarray(charuco, dtype=np.uint8)
         nx, ny = self.cols + 1, self.rows + 1
         img = np.full((ny * s + 2 * m, nx * s + 2 * m), 255, np.uint8)
         for j in range(ny):
@@ -140,7 +140,7 @@ def read_gray(path: str | Path) -> NDArray[np.uint8]:
     img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     if img is None:
         raise InputError(f"{path}: not a readable image", "remove it or replace it with a JPEG/PNG capture")
-    return img
+    return np.asarray(img, dtype=np.uint8)
 
 
 def as_gray(image: NDArray, channel_order: Literal["bgr", "rgb"] = "bgr") -> NDArray[np.uint8]:
@@ -215,12 +215,12 @@ def detect(board: Board, image: NDArray, source: str = "") -> BoardView | None:
     corners, ids, _, _ = detector.detectBoard(gray)
     if ids is None or len(ids) < 6:
         return None
-    ids = ids.ravel().astype(np.int64)
-    obj = board.object_points()[ids]
+    corner_ids = ids.ravel().astype(np.int64)
+    obj = board.object_points()[corner_ids]
     # The window must stay inside the white gap between a corner and the nearest marker edges.
     gap = 0.5 * (board.square_m - board.marker_m) / board.square_m
     pts = refine_scattered_corners(gray, corners.reshape(-1, 2).astype(np.float64), 0.8 * gap)
-    return BoardView(pts, obj, ids, size, source, gray)
+    return BoardView(pts, obj, corner_ids, size, source, gray)
 
 
 def _canonical_order(pts: NDArray[np.float64], pattern_size: tuple[int, int]) -> NDArray[np.float64]:

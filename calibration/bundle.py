@@ -132,14 +132,14 @@ def bundle_adjust(cameras: list[Intrinsics], models: list[str], observations: li
             raise ValueError("two cameras need an initial T_1_from_0")
         x0.append(np.concatenate(rvec_tvec_from_pose(T_1_from_0)))
     x0.extend(np.concatenate(rvec_tvec_from_pose(T)) for T in T_0_from_view)
-    x0 = np.concatenate(x0)
+    x_start = np.concatenate(x0)
     sparsity = problem.sparsity()
     groups = group_columns(sparsity)
 
     def jacobian(x: NDArray[np.float64]) -> NDArray[np.float64]:
         return approx_derivative(problem.residuals, x, method="2-point", sparsity=(sparsity, groups)).toarray()
 
-    fit = least_squares(problem.residuals, x0, jac=jacobian, method="trf", x_scale="jac", ftol=BA_TOLERANCE,
+    fit = least_squares(problem.residuals, x_start, jac=jacobian, method="trf", x_scale="jac", ftol=BA_TOLERANCE,
                         xtol=BA_TOLERANCE, gtol=BA_TOLERANCE, tr_solver="exact", max_nfev=BA_MAX_EVALUATIONS)
     x = fit.x
     out_cams = []
@@ -152,9 +152,9 @@ def bundle_adjust(cameras: list[Intrinsics], models: list[str], observations: li
         s = x[problem.stereo_offset:problem.stereo_offset + 6]
         T10 = pose_from_rvec_tvec(s[:3], s[3:])
     poses = [pose_from_rvec_tvec(p[:3], p[3:]) for p in x[problem.pose_offset:].reshape(-1, 6)]
-    residuals: list[NDArray[np.float64] | None] = [None] * len(observations)
+    residuals: dict[int, NDArray[np.float64]] = {}
     for idx, r in problem.residual_blocks(x):
         bounds = np.cumsum([0, *[len(observations[k].object_points) for k in idx]])
         for k, a, b in zip(idx, bounds[:-1], bounds[1:], strict=True):
             residuals[k] = r[a:b]
-    return BundleResult(out_cams, T10, poses, residuals)  # type: ignore[arg-type]
+    return BundleResult(out_cams, T10, poses, [residuals[k] for k in range(len(observations))])

@@ -36,7 +36,7 @@ def fundamental_matrix(left: Intrinsics, right: Intrinsics, T_right_from_left: N
 def undistort_pixels(intr: Intrinsics, pixels: NDArray[np.float64]) -> NDArray[np.float64]:
     """Pixels (n, 2) with lens distortion removed, in the same camera matrix."""
     uv = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
-    return cv2.undistortPoints(uv, intr.K, intr.dist_array, P=intr.K).reshape(-1, 2)
+    return np.asarray(cv2.undistortPoints(uv, intr.K, intr.dist_array, P=intr.K), dtype=np.float64).reshape(-1, 2)
 
 
 def epipolar_errors(left: Intrinsics, right: Intrinsics, T_right_from_left: NDArray,

@@ -13,6 +13,7 @@ degree weighs like 17 mm) and position error (metres).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,7 +77,7 @@ def _log_rotation(R: NDArray[np.float64]) -> NDArray[np.float64]:
     import cv2
 
     v, _ = cv2.Rodrigues(np.asarray(R, dtype=np.float64))
-    return v.ravel()
+    return np.asarray(v, dtype=np.float64).ravel()
 
 
 def _initial_model(angles: list[NDArray[np.float64]], poses: list[NDArray[np.float64]],
@@ -150,7 +151,7 @@ def fit_head(angles_deg: list[ArrayLike], T_base_from_projector: list[NDArray[np
             a = init.axes[j] + x[4 * j] * e1 + x[4 * j + 1] * e2
             axes[j] = a / np.linalg.norm(a)
             points[j] = init.points[j] + x[4 * j + 2] * e1 + x[4 * j + 3] * e2
-        dR = rotation_about(x[12:15], np.linalg.norm(x[12:15])) if np.linalg.norm(x[12:15]) > 0 else np.eye(3)
+        dR = rotation_about(x[12:15], float(np.linalg.norm(x[12:15]))) if np.linalg.norm(x[12:15]) > 0 else np.eye(3)
         T0 = init.T_robot_from_projector_zero
         T_zero = make_pose(dR @ T0[:3, :3], T0[:3, 3] + x[15:18])
         return HeadModel(axes, points, T_zero)
@@ -172,7 +173,7 @@ def fit_head(angles_deg: list[ArrayLike], T_base_from_projector: list[NDArray[np
                    rot, pos)
 
 
-def head_errors(model: HeadModel, angles_deg: list[ArrayLike], T_base_from_projector: list[NDArray[np.float64]]
+def head_errors(model: HeadModel, angles_deg: Sequence[ArrayLike], T_base_from_projector: list[NDArray[np.float64]]
                 ) -> tuple[list[float], list[float]]:
     """(rotation errors in degrees, position errors in metres) of the model's predictions vs measured poses."""
     rot, pos = [], []

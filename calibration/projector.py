@@ -66,7 +66,7 @@ def gray_code_patterns(width: int, height: int) -> list[NDArray[np.uint8]]:
     if not ok:
         raise InputError(f"OpenCV could not make Gray code patterns for a {width}x{height} projector")
     white = np.full((height, width), 255, np.uint8)
-    return [*list(images), white, np.zeros_like(white)]
+    return [*(np.asarray(image, dtype=np.uint8) for image in images), white, np.zeros_like(white)]
 
 
 def gray_code_bits(width: int, height: int) -> tuple[int, int]:
@@ -448,6 +448,7 @@ def calibrate_projector_with_board(board: Board, captures: list[BoardCaptures], 
         observations.append(Observation(1, i, pv.image_points, pv.object_points))
     fit = bundle_adjust([camera, inverse.projector], [camera_model, model], observations, T_cam_from_board,
                         _mean_pose(inverse.T_projector_from_view), fixed=[camera_fixed, False])
+    assert fit.T_1_from_0 is not None  # two cameras: the bundle refined the projector's pose
     cam_res = np.concatenate(fit.residuals[0::2])
     proj_res = fit.residuals[1::2]
     return ProjectorCalibration(

@@ -182,7 +182,7 @@ def calibrate_camera(views: list[BoardView], model: str = DEFAULT_MODEL, reject_
             break
         rejected.append((kept[worst].source, per_view[worst]))
         del kept[worst]
-    intr = Intrinsics.from_K(K, size[0], size[1], dist5_from(dist))
+    intr = Intrinsics.from_K(K, size[0], size[1], dist5_from(np.asarray(dist, dtype=np.float64)))
     return CameraCalibration(intr, float(rms), kept, poses, per_view, rejected, model)
 
 
@@ -281,6 +281,7 @@ def _joint(pairs: list[tuple[BoardView, BoardView]], mono_left: CameraCalibratio
     fit = bundle_adjust([mono_left.intrinsics, mono_right.intrinsics], [model, model], observations, poses0,
                         T_right_from_left)
     left, right = fit.cameras
+    assert fit.T_1_from_0 is not None  # two cameras: the bundle refined the right one's pose
     per_pair = [float(np.sqrt(np.mean(np.sum(np.concatenate([fit.residuals[2 * i], fit.residuals[2 * i + 1]]) ** 2,
                                              axis=1)))) for i in range(len(pairs))]
     epi = [float(np.mean(epipolar_errors(left, right, fit.T_1_from_0, lv.image_points, rv.image_points)))

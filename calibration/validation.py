@@ -70,7 +70,8 @@ def projected_charuco(width: int, height: int, square_px: int, dictionary: str =
     img = np.full((height, width), 255, np.uint8)
     img[oy:oy + ny * square_px, ox:ox + nx * square_px] = board.charuco_board().generateImage(
         (nx * square_px, ny * square_px), marginSize=0)
-    corners = board.charuco_board().getChessboardCorners()[:, :2].astype(np.float64) + np.array([ox, oy]) - 0.5
+    board_corners = np.asarray(board.charuco_board().getChessboardCorners(), dtype=np.float64)
+    corners = board_corners[:, :2] + np.array([ox, oy]) - 0.5
     return ProjectedGrid(img, board, corners)
 
 

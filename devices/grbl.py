@@ -39,7 +39,7 @@ class GrblError(DeviceRefusedError):
 class GrblDrives:
     """Client of a GRBL controller driving the scanner's two linear axes."""
 
-    def __init__(self, link: SerialLink[str], max_feed_mm_min: float = 15000.0, retries: int = 8,
+    def __init__(self, link: SerialLink[str, str], max_feed_mm_min: float = 15000.0, retries: int = 8,
                  homing_timeout_s: float = 60.0) -> None:
         self.link = link
         self.homing_timeout_s = homing_timeout_s

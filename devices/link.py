@@ -26,7 +26,11 @@ from devices.errors import DeviceError, DeviceTimeoutError, DisconnectedError, F
 POLL_S = 0.01  # granularity of the read deadline
 MAX_LINE_BYTES = 4096  # longer "lines" are garbage: dropped so a device spewing noise cannot exhaust memory
 
-Frame = TypeVar("Frame")
+# Framer[Received, Sent]: feed() gives Received frames, encode() takes Sent ones. Most protocols use one type both
+# ways; the wall scanner's framer gives strings or Damaged and sends strings.
+Received = TypeVar("Received")
+Sent = TypeVar("Sent")
+Sent_contra = TypeVar("Sent_contra", contravariant=True)
 Answer = TypeVar("Answer")
 
 
@@ -44,7 +48,7 @@ class Noise:
 TEXT_NOISE = Noise(insert=(33, 127), junk=(32, 127), junk_length=(1, 30))
 
 
-class Framer(Protocol[Frame]):
+class Framer(Protocol[Received, Sent_contra]):
     """Frames in and out of a byte stream (pyserial's Packetizer, without the thread).
 
     feed() takes received bytes and returns the complete frames they finish (keeping a partial one for the
@@ -54,11 +58,13 @@ class Framer(Protocol[Frame]):
 
     terminator: bytes
     noise: Noise
-    rejected_bytes: int
 
-    def feed(self, data: bytes) -> list[Frame]: ...
+    @property
+    def rejected_bytes(self) -> int: ...  # read-only: a framer wrapping another one passes its count on
 
-    def encode(self, frame: Frame) -> bytes: ...
+    def feed(self, data: bytes) -> list[Received]: ...
+
+    def encode(self, frame: Sent_contra) -> bytes: ...
 
     def clear(self) -> None: ...
 
@@ -93,7 +99,7 @@ class LineFramer:
         self._buffer.clear()
 
 
-class SerialLink(Generic[Frame]):
+class SerialLink(Generic[Received, Sent]):
     """A framed connection to one device.
 
     url : pyserial URL; framer : the protocol's framer; timeout_s : default deadline for one answer frame;
@@ -101,7 +107,7 @@ class SerialLink(Generic[Frame]):
     hint : what a person should do when the device fails for good (ends every DeviceError of the link).
     """
 
-    def __init__(self, url: str, framer: Framer[Frame], name: str = "device", timeout_s: float = 0.5,
+    def __init__(self, url: str, framer: Framer[Received, Sent], name: str = "device", timeout_s: float = 0.5,
                  baudrate: int = 115200, reconnect_attempts: int = 50, reconnect_delay_s: float = 0.02,
                  hint: str = "check the cable, power and baud rate of the device") -> None:
         self.url = url
@@ -115,7 +121,7 @@ class SerialLink(Generic[Frame]):
         self.lock = threading.RLock()
         self.reconnects = 0  # protocols compare this to notice that the device was reset
         self._port: serial.SerialBase | None = None
-        self._frames: deque[Frame] = deque()
+        self._frames: deque[Received] = deque()
         self.faults_recovered = 0  # timeouts, resends and reconnects that exchange() got over
 
     # ------------------------------------------------------------------ connection
@@ -149,7 +155,7 @@ class SerialLink(Generic[Frame]):
         raise DeviceError(f"{self.name} at {self.url} did not come back after {self.reconnect_attempts} attempts "
                           f"({last})", self.hint)
 
-    def __enter__(self) -> SerialLink[Frame]:
+    def __enter__(self) -> SerialLink[Received, Sent]:
         self.open()
         return self
 
@@ -157,7 +163,7 @@ class SerialLink(Generic[Frame]):
         self.close()
 
     # ------------------------------------------------------------------ request / answer
-    def exchange(self, request: Callable[[], Frame], answer: Callable[[Frame], Answer | None], *, retries: int,
+    def exchange(self, request: Callable[[], Sent], answer: Callable[[Received], Answer | None], *, retries: int,
                  on_reconnect: Callable[[], Exception] | None = None, timeout_s: float | None = None,
                  try_timeout_s: float | None = None, what: str | None = None) -> Answer:
         """Send request() and give each frame that comes back to answer() until it returns a value.
@@ -200,7 +206,7 @@ class SerialLink(Generic[Frame]):
                                  f"tries of {try_timeout_s or frame_s:.2g} s (last: {last_fault})", self.hint)
 
     # ------------------------------------------------------------------ frames
-    def send(self, frame: Frame) -> None:
+    def send(self, frame: Sent) -> None:
         if self._port is None:
             raise DisconnectedError(f"{self.name} at {self.url}: not open")
         try:
@@ -208,7 +214,7 @@ class SerialLink(Generic[Frame]):
         except (serial.SerialException, OSError) as err:
             raise DisconnectedError(f"{self.name} at {self.url}: write failed ({err})") from None
 
-    def receive(self, timeout_s: float | None = None, *, deadline: float | None = None) -> Frame:
+    def receive(self, timeout_s: float | None = None, *, deadline: float | None = None) -> Received:
         """The next complete frame. Waits until `deadline` (time.monotonic()), else timeout_s (default: the
         link's), from now. Raises FrameTimeoutError / DisconnectedError."""
         start = time.monotonic()
@@ -221,7 +227,7 @@ class SerialLink(Generic[Frame]):
                 raise FrameTimeoutError(f"{self.name} at {self.url}: no answer within {deadline - start:.3g} s")
             self._frames.extend(self.framer.feed(self._read()))
 
-    def drain(self) -> list[Frame]:
+    def drain(self) -> list[Received]:
         """Discard (and return) whatever complete frames are already waiting: stale answers after a retry."""
         if self._port is None:
             return []

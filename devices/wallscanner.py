@@ -96,7 +96,7 @@ class ScannerError(DeviceRefusedError):
 class WallScanner:
     """Client of the wall scanner over a SerialLink framed by CrcLineFramer."""
 
-    def __init__(self, link: SerialLink[str | Damaged], retries: int = 8) -> None:
+    def __init__(self, link: SerialLink[str | Damaged, str], retries: int = 8) -> None:
         self.link = link
         self.retries = retries
         self._next_id = 1

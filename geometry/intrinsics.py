@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -86,7 +87,7 @@ class Intrinsics:
         p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
         dist = self.dist_array if distort else np.zeros(5)
         uv, _ = cv2.projectPoints(p, np.zeros(3), np.zeros(3), self.K, dist)
-        return uv.reshape(-1, 2)
+        return np.asarray(uv, dtype=np.float64).reshape(-1, 2)
 
     def rays(self, pixels: ArrayLike) -> NDArray[np.float64]:
         """Unit-z rays (n, 3) in the camera frame through pixels (n, 2), undoing distortion."""
@@ -149,7 +150,7 @@ def read_camera_info(path: str | Path) -> Intrinsics:
     if not isinstance(doc, dict):
         raise InputError(f"{path}: expected a camera_info mapping with image_width, camera_matrix, …")
 
-    def get(key: str) -> object:
+    def get(key: str) -> Any:  # a YAML value, checked where it is used
         if key not in doc:
             raise InputError(f"{path}: camera_info key {key!r} is missing",
                              "a camera_info file needs image_width, image_height, camera_matrix and "

@@ -42,7 +42,7 @@ def rotation_about(axis: ArrayLike, angle_rad: float) -> NDArray[np.float64]:
     a = np.asarray(axis, dtype=np.float64)
     a = a / np.linalg.norm(a)
     R, _ = cv2.Rodrigues(a * float(angle_rad))
-    return R
+    return np.asarray(R, dtype=np.float64)
 
 
 def pose_from_rvec_tvec(rvec: ArrayLike, tvec: ArrayLike) -> Pose:
@@ -55,7 +55,7 @@ def rvec_tvec_from_pose(T: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.f
     """The inverse of pose_from_rvec_tvec: (rvec (3,), tvec (3,))."""
     T = np.asarray(T, dtype=np.float64)
     rvec, _ = cv2.Rodrigues(T[:3, :3])
-    return rvec.reshape(3), T[:3, 3].copy()
+    return np.asarray(rvec, dtype=np.float64).reshape(3), T[:3, 3].copy()
 
 
 def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> Pose:

@@ -226,6 +226,7 @@ def _passes(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: str, 
     xy = np.asarray(xy, dtype=np.float64)
     if order is None:
         order = _pass_order(samples, xy)
+        assert order is not None  # samples has a pass_id (checked above)
     # the usable samples ordered by pass, then by time
     sidx = order[np.isfinite(values[order])]
     if sidx.size == 0:
@@ -583,20 +584,20 @@ def _line_crossings(i: int, targets: list[_Target], pset: _PassSet, fp: Footprin
         cand = np.flatnonzero(np.abs(sin_all) >= MIN_CROSSING_SIN)
         if cand.size == 0:
             continue
-        sin = sin_all[cand]
+        sin_c = sin_all[cand]
         rel = a - pset.origin[cand]
-        t = (rel[:, 0] * e[1] - rel[:, 1] * e[0]) / sin
-        foot = pset.origin[cand] + t[:, None] * pset.unit[cand] - a
+        t_c = (rel[:, 0] * e[1] - rel[:, 1] * e[0]) / sin_c
+        foot = pset.origin[cand] + t_c[:, None] * pset.unit[cand] - a
         s = foot[:, 0] * e[0] + foot[:, 1] * e[1]
         # an oblique pass runs along the line too: its peak's core (±MIN_SIDE_SIGMAS) must keep clear of
         # the line's ends as well as its centre
-        abs_sin = np.abs(sin)
-        margin = sig * (END_MARGIN_SIGMAS + MIN_SIDE_SIGMAS * np.sqrt(np.maximum(1.0 - sin * sin, 0.0)) / abs_sin)
+        abs_sin = np.abs(sin_c)
+        margin = sig * (END_MARGIN_SIGMAS + MIN_SIDE_SIGMAS * np.sqrt(np.maximum(1.0 - sin_c * sin_c, 0.0)) / abs_sin)
         reach = MIN_SIDE_SIGMAS * sig / abs_sin
-        ok = ((margin <= s) & (s <= length - margin) & (pset.t_first[cand] + reach <= t)
-              & (t <= pset.t_last[cand] - reach))
+        ok = ((margin <= s) & (s <= length - margin) & (pset.t_first[cand] + reach <= t_c)
+              & (t_c <= pset.t_last[cand] - reach))
         for m in np.flatnonzero(ok).tolist():
-            found.append((float(s[m]) + 10.0 * j, int(cand[m]), j, float(t[m]), float(abs_sin[m]), normal))
+            found.append((float(s[m]) + 10.0 * j, int(cand[m]), j, float(t_c[m]), float(abs_sin[m]), normal))
     if len(found) > max_crossings:  # evenly along the object
         found.sort(key=lambda f: f[0])
         found = [found[k] for k in np.linspace(0, len(found) - 1, max_crossings).round().astype(int)]

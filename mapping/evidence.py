@@ -135,8 +135,8 @@ def sample_distance(info: GridInfo, xy: ArrayLike, max_radius_m: float) -> NDArr
         use = j < last
         jj = np.minimum(j, cols.size - 1)
         dx = pcx[jj] - qx
-        cand = (dx * dx)[None, :] + dy2[:, jj]
-        d2 = np.where(use[None, :], np.minimum(d2, cand), d2)
+        d2_j = (dx * dx)[None, :] + dy2[:, jj]
+        d2 = np.where(use[None, :], np.minimum(d2, d2_j), d2)
     d = np.where(d2 < max_radius_m * max_radius_m, np.sqrt(d2), np.inf)
     # a merged position is within half a raster diagonal of the real one: count it that much farther
     out[np.ix_(ri, ci)] = d + 0.7072 * _DEDUPE_M
@@ -290,8 +290,8 @@ def unexplained_cells(grid: WallGrid, sensor: str, objects: list[MapObject], cov
             continue
         depth = _DEFAULT_DEPTH_M if obj.depth_m is None else float(obj.depth_m)
         base = float(np.hypot(_footprint_sigma(sensor, obj.cls, depth), splat))
-        reach = 4.0 * base * _KERNEL_SCALES[-1]
-        lo, hi = obj.points_m.min(axis=0) - reach, obj.points_m.max(axis=0) + reach
+        margin = 4.0 * base * _KERNEL_SCALES[-1]
+        lo, hi = obj.points_m.min(axis=0) - margin, obj.points_m.max(axis=0) + margin
         ci = np.flatnonzero((xs >= lo[0]) & (xs <= hi[0]))
         ri = np.flatnonzero((ys >= lo[1]) & (ys <= hi[1]))
         if ci.size == 0 or ri.size == 0:
@@ -484,7 +484,7 @@ class Coverage:
         if covered.shape != shape or response.shape != shape:
             raise InputError(f"{path}: layers of shape {covered.shape}, {response.shape}, expected {shape}")
         return cls(info, {c: covered[k].astype(bool) for k, c in enumerate(names)},
-                   {c: response[k].astype(bool) for k, c in enumerate(names)}, bounds)  # type: ignore[arg-type]
+                   {c: response[k].astype(bool) for k, c in enumerate(names)}, bounds)
 
 
 def regions(mask: NDArray[np.bool_], info: GridInfo, simplify_m: float = 0.003) -> list[dict]:
@@ -551,7 +551,8 @@ def measured_stretches(points: NDArray[np.float64], measured_at: Callable[[NDArr
     for k in range(1, len(pts) - 1):
         same = fl[k - 1] == fl[k]
         d1, d2 = pts[k] - pts[keep[-1]], pts[k + 1] - pts[k]
-        straight = abs(d1[0] * d2[1] - d1[1] * d2[0]) <= 1e-12 * max(np.linalg.norm(d1) * np.linalg.norm(d2), 1e-30)
+        scale = float(np.linalg.norm(d1) * np.linalg.norm(d2))
+        straight = abs(d1[0] * d2[1] - d1[1] * d2[0]) <= 1e-12 * max(scale, 1e-30)
         if not (same and straight):
             keep.append(k)
     keep.append(len(pts) - 1)

@@ -31,6 +31,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import trimesh
@@ -43,6 +44,9 @@ from mapping.fusion import CLASSES, class_map
 from mapping.pipeline import MapResult, ScanData
 from mapping.surface import flat_wall_mesh
 from mapping.texture import CLASS_COLOURS, bake_texture, textured_wall_mesh
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 
 def _looked(result: MapResult) -> NDArray[np.bool_]:
@@ -78,7 +82,7 @@ def write_wall_glb(result: MapResult, path: str | Path, mesh: trimesh.Trimesh | 
     return path
 
 
-def _scale_bar(ax, bounds: tuple[float, float, float, float]) -> None:
+def _scale_bar(ax: Axes, bounds: tuple[float, float, float, float]) -> None:
     x0, y0, x1, y1 = bounds
     span = x1 - x0
     length = next(v for v in (1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01) if v <= span / 4 or v == 0.01)
@@ -121,7 +125,8 @@ def write_map_png(result: MapResult, path: str | Path, title: str = "",
                 p = np.vstack([p, p[:1]]) if o.is_outline else p
                 ax.plot(p[:, 0], p[:, 1], style, color=colour, lw=2.5 if o.shape == "line" else 1.5)
                 any_inferred |= not measured
-    handles = [Line2D([0], [0], color=np.array(CLASS_COLOURS[c]) / 255.0, lw=3,
+    # an RGB array is a colour to matplotlib; its stubs list only tuples
+    handles = [Line2D([0], [0], color=np.array(CLASS_COLOURS[c]) / 255.0, lw=3,  # type: ignore[arg-type]
                       label=mapfile.CLASS_LABELS.get(c, c.replace("_", " "))) for c in CLASSES if c in used]
     if any_inferred:
         handles.append(Line2D([0], [0], color="black", lw=2, ls="--", label="inferred, not measured"))
@@ -153,7 +158,7 @@ def signals_along_line(data: ScanData, xy: NDArray[np.float64], y_m: float,
     # drive v of the rows whose wall height is nearest y_m (frames stand at about the same height)
     mean_y = np.array([np.mean(xy[horizontal][v == lv, 1]) for lv in levels])
     chosen = levels[np.argsort(np.abs(mean_y - y_m))[:rows]]
-    runs = []
+    runs: list[dict[str, NDArray[np.float64]]] = []
     for lv in sorted(chosen):
         sel = np.flatnonzero(horizontal)[v == lv]
         order = np.argsort(xy[sel, 0])

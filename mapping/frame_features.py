@@ -97,12 +97,15 @@ def feature_constraints(data: ScanData, graph: FrameGraph, est: NDArray[np.float
     return added
 
 
-def _corners(pose: NDArray[np.float64], box) -> NDArray[np.float64]:
+Box = tuple[NDArray[np.float64], NDArray[np.float64]]  # (lowest, highest) drive coordinates of a frame's samples
+
+
+def _corners(pose: NDArray[np.float64], box: Box) -> NDArray[np.float64]:
     (u0, v0), (u1, v1) = box
     return apply_pose(pose, np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1]]))
 
 
-def _near(pi, bi, pj, bj, gap: float) -> bool:
+def _near(pi: NDArray[np.float64], bi: Box, pj: NDArray[np.float64], bj: Box, gap: float) -> bool:
     """True if the two frames' wall rectangles overlap or lie within `gap` of each other."""
     ci, cj = _corners(pi, bi), _corners(pj, bj)
     lo = np.maximum(ci.min(axis=0), cj.min(axis=0))
@@ -110,7 +113,8 @@ def _near(pi, bi, pj, bj, gap: float) -> bool:
     return bool(np.all(hi - lo > -gap))
 
 
-def _pair_points(graph: FrameGraph, i: int, j: int, est, pts_i, pts_j, gate: float) -> int:
+def _pair_points(graph: FrameGraph, i: int, j: int, est: NDArray[np.float64], pts_i: list[MapObject],
+                 pts_j: list[MapObject], gate: float) -> int:
     if not pts_i or not pts_j:
         return 0
     wi = np.vstack([apply_pose(est[i], p.points_m) for p in pts_i])
@@ -140,7 +144,8 @@ def _end_segments(poly: NDArray[np.float64]) -> list[tuple[NDArray[np.float64], 
     return out
 
 
-def _pair_lines(graph: FrameGraph, i: int, j: int, est, lines_i, lines_j, gate: float) -> int:
+def _pair_lines(graph: FrameGraph, i: int, j: int, est: NDArray[np.float64], lines_i: list[MapObject],
+                lines_j: list[MapObject], gate: float) -> int:
     """A line leaving frame i and one entering frame j that continue each other (same direction, the end of
     one on the other's extension) are one pipe or cable crossing the border: constrain them collinear."""
     n = 0

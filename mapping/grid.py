@@ -73,8 +73,8 @@ class GridInfo:
 
     def cell_centres(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(xs (width,), ys (height,)): wall coordinates of the cell centres, metres."""
-        xs = self.origin_x + (np.arange(self.width) + 0.5) * self.resolution
-        ys = self.origin_y + (np.arange(self.height) + 0.5) * self.resolution
+        xs = self.origin_x + (np.arange(self.width, dtype=np.float64) + 0.5) * self.resolution
+        ys = self.origin_y + (np.arange(self.height, dtype=np.float64) + 0.5) * self.resolution
         return xs, ys
 
     def cell_of(self, xy: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
@@ -209,7 +209,8 @@ class WallGrid:
             delta = np.where(v >= m.threshold_occupied, m.log_odds_hit,
                              np.where(v <= m.threshold_free, m.log_odds_miss, 0.0))
             delta = np.where(ok, delta, 0.0)
-            splat = np.bincount(idx.ravel(), (wk * delta[:, None]).ravel(), minlength=n_cells)
+            splat = np.asarray(np.bincount(idx.ravel(), (wk * delta[:, None]).ravel(), minlength=n_cells),
+                               dtype=np.float64)  # weighted counts are floats (numpy's stubs say int)
             cone = self._blur(splat.reshape(self.info.shape), m.cone_radius_m, peak_one=True)
             layer = self.log_odds[s]
             layer += cone.astype(np.float32)

@@ -122,15 +122,17 @@ def _is_ring(cls: str, points: NDArray[np.float64]) -> bool:
     return cls != "non_metal" or bool(len(points) >= 4 and np.allclose(points[0], points[-1]))
 
 
-def _finite_number(where: str, key: str, value: object, lo: float, hi: float, optional: bool = False) -> float | None:
-    if value is None and optional:
-        return None
+def _finite_number(where: str, key: str, value: object, lo: float, hi: float) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(f"{where}: {key} must be a number, got {value!r}")
     v = float(value)
     if not (math.isfinite(v) and lo <= v <= hi):
         raise InputError(f"{where}: {key} = {value!r} is outside {lo:g}…{hi:g}")
     return v
+
+
+def _optional_number(where: str, key: str, value: object, lo: float, hi: float) -> float | None:
+    return None if value is None else _finite_number(where, key, value, lo, hi)
 
 
 def parse_object(item: object, where: str) -> MappedObject:
@@ -157,15 +159,15 @@ def parse_object(item: object, where: str) -> MappedObject:
         raise InputError(f"{where}: key 'width_m' is missing")
     width = _finite_number(where, "width_m", item["width_m"], 0.0, 10.0)
     confidence = _finite_number(where, "confidence", item.get("confidence", 1.0), 0.0, 1.0)
-    sigma = _finite_number(where, "position_sigma_m", item.get("position_sigma_m"), 0.0, 1.0, optional=True)
+    sigma = _optional_number(where, "position_sigma_m", item.get("position_sigma_m"), 0.0, 1.0)
     if sigma is None:
-        sigma = DEFAULT_SIGMA_M / max(min(confidence, 1.0), MIN_CONFIDENCE_FOR_SIGMA)  # type: ignore[type-var]
-    depth = _finite_number(where, "depth_m", item.get("depth_m"), 0.0, 1.0, optional=True)
-    depth_sigma = _finite_number(where, "depth_sigma_m", item.get("depth_sigma_m"), 0.0, 1.0, optional=True)
+        sigma = DEFAULT_SIGMA_M / max(min(confidence, 1.0), MIN_CONFIDENCE_FOR_SIGMA)
+    depth = _optional_number(where, "depth_m", item.get("depth_m"), 0.0, 1.0)
+    depth_sigma = _optional_number(where, "depth_sigma_m", item.get("depth_sigma_m"), 0.0, 1.0)
     shape = item.get("kind")
     if shape is not None and shape not in SHAPES:
         raise InputError(f"{where}: kind {shape!r} is unknown", f"use one of {', '.join(SHAPES)}")
-    obj = MappedObject(str(cls), points, float(width), float(confidence), float(sigma),  # type: ignore[arg-type]
+    obj = MappedObject(str(cls), points, float(width), float(confidence), float(sigma),
                        depth, depth_sigma, None, shape)
     measured = item.get("measured")
     if measured is not None:

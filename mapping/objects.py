@@ -115,7 +115,8 @@ def normalise(signal: NDArray[np.float64], two_sided: bool = False) -> tuple[NDA
     return z, level, sigma
 
 
-def _smooth_derivatives(z: NDArray[np.float64], known: NDArray[np.bool_], sigma_px: float):
+def _smooth_derivatives(z: NDArray[np.float64], known: NDArray[np.bool_], sigma_px: float
+                        ) -> tuple[NDArray[np.float64], ...]:
     """Normalised-convolution Gaussian derivatives: unknown cells do not drag edges down."""
     w = ndimage.gaussian_filter(known.astype(np.float64), sigma_px)
     wsafe = np.maximum(w, 1e-6)
@@ -284,7 +285,8 @@ def _fit_line(p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.f
     return c, vt[0]
 
 
-def _intersect(c1, d1, c2, d2) -> NDArray[np.float64] | None:
+def _intersect(c1: NDArray[np.float64], d1: NDArray[np.float64], c2: NDArray[np.float64],
+               d2: NDArray[np.float64]) -> NDArray[np.float64] | None:
     A = np.column_stack([d1, -d2])
     if abs(np.linalg.det(A)) < 1e-6:
         return None
@@ -631,7 +633,8 @@ def points_on_lines(points: list[MapObject], lines: list[MapObject],
     line's end, is what the lines meet at (a box, a junction, the crossing itself: metal, not a fastener);
     the others — alone or on one line's run — are fasteners."""
     polylines = [ln for ln in lines if ln.points_m.shape[0] >= 2]
-    fasteners, boxes = [], []
+    fasteners: list[MapObject] = []
+    boxes: list[MapObject] = []
     for p in points:
         q = p.points_m[0]
         near = [ln for ln in polylines if _distance_to_polyline(q, ln.points_m) <= max(clearance_m, ln.width_m)]

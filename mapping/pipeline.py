@@ -184,20 +184,22 @@ def wall_bounds(data: ScanData, xy: NDArray[np.float64]) -> tuple[float, float, 
     return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
 
 
-def stitch_frames(data: ScanData) -> tuple[NDArray[np.float64] | None, list[str]]:
-    """Frame poses aligned from their localization priors, the 2-D laser's x fixes (if logged) and, where
-    frames overlap, shared in-wall features; None if the log has no frames. See mapping.stitching."""
+def stitch_frames(data: ScanData) -> tuple[NDArray[np.float64] | None, list[str], list[str]]:
+    """(poses, notes, warnings): frame poses aligned from their localization priors, the 2-D laser's x fixes
+    (if logged) and, where frames overlap, shared in-wall features, None if the log has no frames; what they
+    were stitched with; what could not be. See mapping.stitching."""
     from mapping.frame_features import feature_constraints, frames_features
 
     f = data.frames
     if not f or f["frame_id"].size == 0:
-        return None, ["log has no frames; using logged sample positions"]
+        return None, [], ["log has no frames; using logged sample positions"]
     est = np.column_stack([f["est_x_m"], f["est_y_m"], f["est_phi_rad"]])
     cov = f["cov"].copy()
-    notes = []
+    notes: list[str] = []
+    warnings: list[str] = []
     bad = ~(np.all(np.isfinite(est), axis=1) & np.all(np.isfinite(cov.reshape(-1, 9)), axis=1))
     if bad.any():
-        notes.append(f"{int(bad.sum())} frame(s) without a sound localization; their samples keep the logged "
+        warnings.append(f"{int(bad.sum())} frame(s) without a sound localization; their samples keep the logged "
                      "positions")
         est[bad] = 0.0
         cov[bad] = np.diag([1e2, 1e2, 1e2])  # effectively free; constrained only by features if any
@@ -225,7 +227,7 @@ def stitch_frames(data: ScanData) -> tuple[NDArray[np.float64] | None, list[str]
             ([f"{n_feat - dropped} shared in-wall feature(s)"] if n_feat else [])
         notes.append(f"stitched {len(est)} frames with {' and '.join(parts)}"
                      + (f" ({dropped} inconsistent pairing(s) dropped)" if dropped else ""))
-    return poses, notes
+    return poses, notes, warnings
 
 
 def build_map(data: ScanData, settings: MapSettings | None = None) -> MapResult:
@@ -234,9 +236,9 @@ def build_map(data: ScanData, settings: MapSettings | None = None) -> MapResult:
     warnings = list(data.warnings)
     poses, frame_ids, notes = None, None, []
     if settings.stitch and data.frames:
-        poses, stitch_notes = stitch_frames(data)
-        warnings += [n for n in stitch_notes if not n.startswith("stitched")]
-        notes += [n for n in stitch_notes if n.startswith("stitched")]
+        poses, stitch_notes, stitch_warnings = stitch_frames(data)
+        warnings += stitch_warnings
+        notes += stitch_notes
         frame_ids = data.frames["frame_id"]
     xy = sample_positions(data, poses)
     if poses is not None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -94,8 +95,8 @@ def simulate_scan(wall: Wall, seed: int = 0, line_spacing_m: float = 0.01, sampl
             pass_id += 1
     samples = {k: np.concatenate(v) for k, v in cols.items()}
     int_cols = ("frame_id", "pass_id", "axis", "direction")
-    for k in int_cols:
-        samples[k] = samples[k].astype(np.int64)
+    for name in int_cols:
+        samples[name] = samples[name].astype(np.int64)
     samples["seq"] = np.arange(samples["time_s"].shape[0])
     frame_arrays = {k: np.asarray(v, dtype=np.int64 if k == "frame_id" else np.float64)
                     for k, v in frames.items()}
@@ -114,7 +115,7 @@ def write_log(data: ScanData, path: str | Path, overwrite: bool = True) -> Path:
     with log:
         f = data.frames
         for k in range(f["frame_id"].shape[0]):
-            row = {c: (int(f[c][k]) if c == "frame_id" else float(f[c][k]))
+            row: dict[str, Any] = {c: (int(f[c][k]) if c == "frame_id" else float(f[c][k]))
                    for c in f if c != "cov"}
             row["cov"] = f["cov"][k]
             log.append_frame(row)

@@ -179,6 +179,8 @@ class FrameGraph:
         if j is None:
             j = i.copy()
             Jj = np.zeros_like(Ji)
+        elif Jj is None:
+            raise ValueError("a constraint between two frames needs Jj")
         j = np.asarray(j, dtype=np.int64).reshape(-1)
         for name, idx in (("i", i), ("j", j)):
             if idx.size and (idx.min() < 0 or idx.max() >= self.n_frames):

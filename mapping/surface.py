@@ -73,6 +73,7 @@ def merge_meshes(meshes: list[trimesh.Trimesh], weld_m: float = 1e-4) -> trimesh
     if not meshes:
         raise InputError("no triangles in any range image to merge (all depths invalid?)")
     merged = trimesh.util.concatenate(meshes)
+    assert isinstance(merged, trimesh.Trimesh)  # meshes concatenate to a mesh (trimesh types it as any Geometry)
     digits = max(0, int(-np.floor(np.log10(weld_m))))
     merged.merge_vertices(digits_vertex=digits)
     merged.remove_unreferenced_vertices()

@@ -41,7 +41,7 @@ class ChunkBounds:
                            axis=1)  # (n, 8, 4)
         clip = corners @ np.asarray(clip_from_world, dtype=np.float64).T
         xyz, w = clip[..., :3], clip[..., 3:]
-        outside = ((xyz > w).all(axis=1) | (xyz < -w).all(axis=1)).any(axis=1)
+        outside = np.any((xyz > w).all(axis=1) | (xyz < -w).all(axis=1), axis=1)
         visible = np.flatnonzero(~outside)
         if len(visible) == 0:
             return []

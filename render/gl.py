@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ctypes.util
 import os
+from typing import Any
 
 import moderngl
 
@@ -35,7 +36,7 @@ def create_context(backend: str | None = None) -> moderngl.Context:
                     "install Mesa's EGL and GL drivers (Debian: apt-get install libegl1 libgl1 "
                     "libgl1-mesa-dri)")
     try:
-        kwargs = {"backend": "egl"} if backend == "egl" else {}
+        kwargs: dict[str, Any] = {"backend": "egl"} if backend == "egl" else {}
         ctx = moderngl.create_context(standalone=True, require=REQUIRED_GL_VERSION, **kwargs)
     except Exception as err:  # glcontext raises bare Exceptions with driver text
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__

@@ -73,7 +73,10 @@ class MeshRenderer:
     def __init__(self, ctx: moderngl.Context | None = None, background: ArrayLike = (0, 0, 0, 0)) -> None:
         self._owns_ctx = ctx is None
         self.ctx = create_context() if ctx is None else ctx
-        self.background = tuple(float(c) for c in np.asarray(background, dtype=float).ravel()[:4])
+        rgba = np.zeros(4)  # fewer than four values: the rest 0, as Framebuffer.clear's defaults
+        given = np.asarray(background, dtype=float).ravel()[:4]
+        rgba[:len(given)] = given
+        self.background = (float(rgba[0]), float(rgba[1]), float(rgba[2]), float(rgba[3]))
         # Every GL call runs inside `with self.ctx`: another library's context (pyrender's, say) may be
         # current in this thread, and leaving ours current would break it in turn.
         with self.ctx:
@@ -110,8 +113,9 @@ class MeshRenderer:
     def _upload(self, mesh: trimesh.Trimesh) -> _DrawItem:
         vertex_order, faces = cache_friendly(mesh.vertices, mesh.faces)
         positions = np.asarray(mesh.vertices, dtype=np.float32)[vertex_order]
-        image, uv = _texture_of(mesh)
-        if image is not None:
+        textured = _texture_of(mesh)
+        if textured is not None:
+            image, uv = textured
             uv = uv[vertex_order]
             # trimesh's UV v runs up the image; GL textures here are stored top row first.
             uv = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]]).astype(np.float32)
@@ -169,8 +173,8 @@ class MeshRenderer:
                 # Nearest neighbour: blending depths across an edge would invent surfaces.
                 z_pinhole = self._read_depth(source.fbo, pinhole, near, far)
                 dmap = distortion_map(intr)
-                z = cv2.remap(z_pinhole, dmap.map_xy[..., 0], dmap.map_xy[..., 1], cv2.INTER_NEAREST,
-                              borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+                z = np.asarray(cv2.remap(z_pinhole, dmap.map_xy[..., 0], dmap.map_xy[..., 1], cv2.INTER_NEAREST,
+                                         borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan")), dtype=np.float32)
             return RenderResult(color, z)
 
     def _draw(self, intr: Intrinsics, T_world_from_camera: NDArray[np.float64], near: float, far: float
@@ -184,7 +188,9 @@ class MeshRenderer:
         clip_bytes = clip.astype(np.float32).T.tobytes()  # GLSL matrices are column-major
         for item in self._items:
             program = item.vao.program
-            program["u_clip_from_world"].write(clip_bytes)
+            clip_uniform = program["u_clip_from_world"]
+            assert isinstance(clip_uniform, moderngl.Uniform)  # the mesh shader declares it a uniform mat4
+            clip_uniform.write(clip_bytes)
             if item.texture is not None:
                 item.texture.use(0)
                 program["u_texture"] = 0
@@ -280,16 +286,17 @@ def _scene_geometries(mesh: trimesh.Trimesh | trimesh.Scene) -> list[trimesh.Tri
     raise InputError(f"cannot render a {type(mesh).__name__}; expected a trimesh mesh or scene (e.g. a GLB)")
 
 
-def _texture_of(mesh: trimesh.Trimesh) -> tuple[NDArray[np.uint8] | None, NDArray[np.float64] | None]:
+def _texture_of(mesh: trimesh.Trimesh) -> tuple[NDArray[np.uint8], NDArray[np.float64]] | None:
+    """(RGBA image, UVs) of a textured mesh; None when it has no UVs or no texture image."""
     visual = mesh.visual
-    if getattr(visual, "kind", None) != "texture" or getattr(visual, "uv", None) is None:
-        return None, None
+    if not isinstance(visual, trimesh.visual.TextureVisuals) or visual.uv is None:
+        return None
     material = visual.material
     image = getattr(material, "baseColorTexture", None)
     if image is None:
         image = getattr(material, "image", None)
     if image is None:
-        return None, None
+        return None
     rgba = np.asarray(image.convert("RGBA") if hasattr(image, "convert") else image, dtype=np.uint8)
     if rgba.ndim != 3 or rgba.shape[2] != 4:
         raise InputError(f"mesh texture has shape {rgba.shape}; expected an RGB(A) image")
@@ -297,7 +304,12 @@ def _texture_of(mesh: trimesh.Trimesh) -> tuple[NDArray[np.uint8] | None, NDArra
 
 
 def _vertex_colors(mesh: trimesh.Trimesh) -> NDArray[np.float32]:
-    colors = np.asarray(mesh.visual.vertex_colors, dtype=np.float32)
-    if colors.shape != (len(mesh.vertices), 4):
-        colors = np.full((len(mesh.vertices), 4), 255.0, dtype=np.float32)
+    visual = mesh.visual
+    n = len(mesh.vertices)
+    if isinstance(visual, trimesh.visual.TextureVisuals):  # no texture image: all in the material's colour
+        colors = np.broadcast_to(np.asarray(visual.material.main_color, dtype=np.float32), (n, 4))
+    else:
+        colors = np.asarray(visual.vertex_colors if visual is not None else None, dtype=np.float32)
+    if colors.shape != (n, 4):
+        colors = np.full((n, 4), 255.0, dtype=np.float32)
     return colors / 255.0

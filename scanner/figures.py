@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import itertools
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -12,8 +14,11 @@ from scanner.log import ScanLog
 from scanner.sensor_model import SensorModel
 from scanner.wall import Wall, load_wall, shipped_walls, wall_from_dict
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
-def _pyplot():  # matplotlib.pyplot, imported late (slow) with the Agg backend
+
+def _pyplot() -> ModuleType:  # matplotlib.pyplot, imported late (slow) with the Agg backend
     import matplotlib
 
     matplotlib.use("Agg")
@@ -50,7 +55,7 @@ def plot_log(log_path: str | Path, out_path: str | Path, max_points: int = 400_0
     return out
 
 
-def _draw_truth(ax, wall: Wall) -> None:
+def _draw_truth(ax: Axes, wall: Wall) -> None:
     for obj in wall.objects:
         g = obj.geometry_m
         if obj.is_line:

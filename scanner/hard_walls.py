@@ -169,8 +169,7 @@ def _bend(rng: np.random.Generator, size: _Size, shape: str, kind: str = "pipe")
         points = [[x, 0.0], [x, y1], [x + run, y1 + run]]
     else:
         raise ValueError(f"unknown bend shape {shape!r}")
-    points = _mirror(points, size, rng.random() < 0.5, rng.random() < 0.5)
-    return [_line(rng, kind, kind, points)]
+    return [_line(rng, kind, kind, _mirror(points, size, rng.random() < 0.5, rng.random() < 0.5))]
 
 
 def _detour(rng: np.random.Generator, size: _Size, kind: str, jogs: str) -> _Group:
@@ -285,12 +284,12 @@ def _deep_pipe(rng: np.random.Generator, size: _Size, vertical: bool, material: 
         right = left + length
         deep, shallow = [[left, y], [right, y]], [[left + _u(rng, 0.0, 0.3), y + gap], [right, y + gap]]
     flip_x, flip_y = rng.random() < 0.5, rng.random() < 0.5
-    deep, shallow = _mirror(deep, size, flip_x, flip_y), _mirror(shallow, size, flip_x, flip_y)
+    deep_m, shallow_m = _mirror(deep, size, flip_x, flip_y), _mirror(shallow, size, flip_x, flip_y)
     if material == "plastic":
-        deep_pipe = _plastic_pipe_dict(rng, "deep-pipe", deep, DEEP_PIPE_DEPTH_M)
+        deep_pipe = _plastic_pipe_dict(rng, "deep-pipe", deep_m, DEEP_PIPE_DEPTH_M)
     else:
-        deep_pipe = _metal_pipe(rng, "deep-pipe", deep, DEEP_PIPE_DEPTH_M)
-    shallow_pipe = _metal_pipe(rng, "shallow-pipe", shallow)
+        deep_pipe = _metal_pipe(rng, "deep-pipe", deep_m, DEEP_PIPE_DEPTH_M)
+    shallow_pipe = _metal_pipe(rng, "shallow-pipe", shallow_m)
     return [deep_pipe, shallow_pipe]
 
 
@@ -337,6 +336,7 @@ def _cavity(rng: np.random.Generator, size: _Size, shape: str) -> _Group:
     w, h = size
     cw, ch = _u(rng, 0.2, 0.4), _u(rng, 0.2, 0.6)
     x0, y0 = _u(rng, 0.1, w - 0.1 - cw), _u(rng, 0.1, h - 0.1 - ch)
+    outline: Any  # corner points: a list, or the mirrored array
     if shape == "rectangle":
         outline = [[x0, y0], [x0 + cw, y0], [x0 + cw, y0 + ch], [x0, y0 + ch]]
     elif shape == "L":
@@ -417,7 +417,7 @@ class _Shape:
 
 def _inside(group: _Group, size: _Size) -> bool:
     return all(0.0 <= x <= size[0] and 0.0 <= y <= size[1]
-               for obj in group for x, y in obj.get("points_m", obj.get("outline_m", ())))
+               for obj in group for x, y in (obj["points_m"] if "points_m" in obj else obj.get("outline_m", ())))
 
 
 def _place(builder: _Builder, rng: np.random.Generator, size: _Size, placed: list[_Shape],

@@ -1090,6 +1090,7 @@ def make_planner(kind: str, wall: Wall, drives: DriveConfig, hysteresis_m: float
     if kind == "adaptive":
         check_planner_version(options)
         options.pop("planner_version", None)
-        cfg = AdaptiveConfig(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in options.items()})
+        given: dict[str, Any] = {k: (tuple(v) if isinstance(v, list) else v) for k, v in options.items()}
+        cfg = AdaptiveConfig(**given)
         return AdaptivePlanner(wall, drives, hysteresis_m, cfg)
     raise InputError(f"plan = {kind!r}: unknown plan", "use dense or adaptive")

@@ -206,7 +206,7 @@ class SensorModel:
         coupling = 0.0
         if obj.is_metal and obj.kind != "cable" and live:
             probe = densify(obj.geometry_m, 0.01) if len(obj.geometry_m) > 1 else obj.geometry_m
-            gap = min(float(distance_to_polyline(probe, c.points_m).min()) for c in live)
+            gap = min(float(distance_to_polyline(probe, c.geometry_m).min()) for c in live)
             coupling = math.exp(-gap / cfg.ac_coupling_length_m)
         if obj.kind == "pipe":
             size = (obj.diameter_m or 0.015) / 0.015

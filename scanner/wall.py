@@ -161,13 +161,16 @@ class WallObject:
     @property
     def geometry_m(self) -> np.ndarray:
         """The object's points (polyline, point or outline), (n, 2) metres."""
-        return self.points_m if self.points_m is not None else self.outline_m  # type: ignore[return-value]
+        points = self.points_m if self.points_m is not None else self.outline_m
+        if points is None:  # the wall file's reader never makes one; a WallObject built by hand might
+            raise ValueError(f"{self.kind} {self.id!r} has neither points_m nor outline_m")
+        return points
 
     def length(self) -> float:
         """Polyline length in metres (0 for points and areas)."""
         if self.kind not in LINE_KINDS:
             return 0.0
-        return float(np.linalg.norm(np.diff(self.points_m, axis=0), axis=1).sum())
+        return float(np.linalg.norm(np.diff(self.geometry_m, axis=0), axis=1).sum())
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"kind": self.kind, "id": self.id}
@@ -589,7 +592,7 @@ def _too_close(points: np.ndarray, objects: list[WallObject], min_sep: float) ->
     for obj in objects:
         if obj.kind not in LINE_KINDS:
             continue
-        d = distance_to_polyline(probe, obj.points_m)
+        d = distance_to_polyline(probe, obj.geometry_m)
         near = d < min_sep
         # A perpendicular crossing touches only briefly; a parallel run stays close: reject only the latter.
         if near.sum() * 0.02 > 2.5 * min_sep:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from functools import cache
 from importlib import resources
+from typing import TypedDict
 
 GLSL_VERSION = "#version 330 core"
 
@@ -22,7 +23,14 @@ def source(name: str) -> str:
         raise FileNotFoundError(f"shader {name!r} not found: expected shaders/{name}.glsl") from None
 
 
-def program_source(name: str, defines: dict[str, object] | None = None) -> dict[str, str]:
+class ProgramSource(TypedDict):
+    """The keyword arguments of moderngl's ctx.program for one program's two stages."""
+
+    vertex_shader: str
+    fragment_shader: str
+
+
+def program_source(name: str, defines: dict[str, object] | None = None) -> ProgramSource:
     """{'vertex_shader': …, 'fragment_shader': …} for moderngl's ctx.program(**…)."""
     body = source(name)
     extra = "".join(f"#define {k} {v}\n" for k, v in (defines or {}).items())

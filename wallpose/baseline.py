@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wallpose import limits
-from wallpose.evidence import NotEnoughEvidenceError
+from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
 from wallpose.pattern import CheckerPattern
 from wallpose.plane import plane_in_frame
 from wallpose.rig import ViewRig
@@ -82,7 +82,8 @@ def square_corners(image: NDArray[np.uint8], camera_name: str = "camera") -> NDA
     gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
     lo, hi = np.percentile(gray, [1, 99.5])
     if hi - lo < limits.MIN_PATTERN_CONTRAST:
-        raise NotEnoughEvidenceError("no_pattern", f"{camera_name}: low contrast ({hi - lo:.0f} grey levels), "
+        raise NotEnoughEvidenceError(EvidenceCode.NO_PATTERN,
+                                     f"{camera_name}: low contrast ({hi - lo:.0f} grey levels), "
                                      "no square to see")
     smooth = cv2.GaussianBlur(gray, (5, 5), 0)
     otsu, _ = cv2.threshold(smooth, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
@@ -91,12 +92,13 @@ def square_corners(image: NDArray[np.uint8], camera_name: str = "camera") -> NDA
     _, binary = cv2.threshold(smooth, level, 255, cv2.THRESH_BINARY)
     contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
-        raise NotEnoughEvidenceError("no_pattern", f"{camera_name}: the square is not visible")
+        raise NotEnoughEvidenceError(EvidenceCode.NO_PATTERN, f"{camera_name}: the square is not visible")
     contour = max(contours, key=cv2.contourArea).reshape(-1, 2)
     quad = cv2.approxPolyDP(contour.reshape(-1, 1, 2), 0.02 * cv2.arcLength(contour.reshape(-1, 1, 2), True),
                             True).reshape(-1, 2)
     if len(quad) != 4 or cv2.contourArea(contour.reshape(-1, 1, 2)) < 400:
-        raise NotEnoughEvidenceError("no_pattern", f"{camera_name}: the square's outline has {len(quad)} corners")
+        raise NotEnoughEvidenceError(EvidenceCode.NO_PATTERN,
+                                     f"{camera_name}: the square's outline has {len(quad)} corners")
     # each side: a line fitted to the outline between two vertices (ends trimmed), corners where they meet
     at = [int(np.argmin(np.linalg.norm(contour - q, axis=1))) for q in quad]
     lines = []
@@ -117,10 +119,10 @@ def square_corners(image: NDArray[np.uint8], camera_name: str = "camera") -> NDA
     angles = np.arctan2(quad[:, 1] - centre[1], quad[:, 0] - centre[0])
     quad = quad[np.argsort(angles)]              # image y down: increasing angle runs clockwise on screen
     start = int(np.argmin(quad.sum(axis=1)))      # top-left first
-    quad = np.roll(quad, -start, axis=0).astype(np.float32).reshape(-1, 1, 2)
-    cv2.cornerSubPix(gray, quad, (SUBPIX_HALF_WINDOW, SUBPIX_HALF_WINDOW), (-1, -1),
+    quad_px = np.roll(quad, -start, axis=0).astype(np.float32).reshape(-1, 1, 2)
+    cv2.cornerSubPix(gray, quad_px, (SUBPIX_HALF_WINDOW, SUBPIX_HALF_WINDOW), (-1, -1),
                      (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
-    return quad.reshape(4, 2).astype(np.float64)
+    return quad_px.reshape(4, 2).astype(np.float64)
 
 
 def estimate_plane_baseline(image_left: NDArray[np.uint8], image_right: NDArray[np.uint8],
@@ -130,7 +132,7 @@ def estimate_plane_baseline(image_left: NDArray[np.uint8], image_right: NDArray[
     right = views.camera_right.rays(square_corners(image_right, "camera_right"))[:, :2]
     points = triangulate_stereo(left, right, views.T_camera_right_from_camera_left)
     if not np.all(np.isfinite(points)):
-        raise NotEnoughEvidenceError("no_pattern", "the square's corners do not triangulate")
+        raise NotEnoughEvidenceError(EvidenceCode.NO_PATTERN, "the square's corners do not triangulate")
     centroid = points.mean(axis=0)
     centred = points - centroid
     normal = np.linalg.eigh(centred.T @ centred)[1][:, 0]

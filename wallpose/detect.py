@@ -110,8 +110,10 @@ def _apply_h(H: NDArray[np.float64], xy: NDArray[np.float64]) -> NDArray[np.floa
 def _sample(gray: NDArray[np.float32], pixels: NDArray[np.float64]) -> NDArray[np.float64]:
     """Bilinear grey levels at (n, 2) pixels; NaN outside the image."""
     maps = pixels.astype(np.float32).reshape(-1, 1, 2)
-    values = cv2.remap(gray, maps, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
-    return values.reshape(-1).astype(np.float64)
+    # OpenCV's stubs want a map2; None is what its docs give when map1 holds both x and y (CV_32FC2)
+    values = cv2.remap(gray, maps, None, cv2.INTER_LINEAR,  # type: ignore[call-overload]
+                       borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+    return np.asarray(values, dtype=np.float64).reshape(-1)
 
 
 class _Rectifier:
@@ -151,7 +153,8 @@ class _Rectifier:
         """(rectified image, valid mask) for the current H."""
         coarse = self.camera_px(H, self.grid_norm).reshape(*self.grid_shape, 2).astype(np.float32)
         full = cv2.resize(coarse, self.size, interpolation=cv2.INTER_LINEAR)   # (h, w, 2): x and y maps
-        rect = cv2.remap(gray, full, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+        rect = cv2.remap(gray, full, None, cv2.INTER_LINEAR,  # type: ignore[call-overload]  # map2: as in _sample
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
         valid = np.isfinite(rect)
         return rect, valid
 
@@ -188,11 +191,13 @@ def _flat_field(rect: NDArray[np.float32], valid: NDArray[np.bool_], square: flo
     black = cv2.blur(cv2.blur(cv2.erode(np.where(sub_valid, sub_rect, 255.0).astype(np.float32), kernel), (k, k)),
                      (k, k))
     if step > 1:
-        white, black = (np.ascontiguousarray(_upsample(e, step, rect.shape)) for e in (white, black))
+        white, black = (np.ascontiguousarray(_upsample(np.asarray(e, dtype=np.float32), step, rect.shape))
+                        for e in (white, black))
     img = rect.copy()
     cv2.patchNaNs(img, 0.0)  # outside the camera image (NaN in rect) reads as black
     # 255 (img - black) / max(white - black, 1), in single passes
-    return cv2.divide(cv2.subtract(img, black), cv2.max(cv2.subtract(white, black), 1.0), scale=255.0)
+    spread = cv2.max(cv2.subtract(white, black), 1.0)  # type: ignore[call-overload]  # a scalar src2 is allowed
+    return np.asarray(cv2.divide(cv2.subtract(img, black), spread, scale=255.0), dtype=np.float32)
 
 
 def _upsample(coarse: NDArray[np.float32], step: int, shape: tuple[int, ...]) -> NDArray[np.float32]:
@@ -201,7 +206,8 @@ def _upsample(coarse: NDArray[np.float32], step: int, shape: tuple[int, ...]) ->
     h, w = shape[:2]
     ny, nx = -(-h // step), -(-w // step)
     coarse = np.pad(coarse, ((0, ny - coarse.shape[0]), (0, nx - coarse.shape[1])), mode="edge")
-    return cv2.resize(coarse, (nx * step, ny * step), interpolation=cv2.INTER_LINEAR)[:h, :w]
+    return np.asarray(cv2.resize(coarse, (nx * step, ny * step), interpolation=cv2.INTER_LINEAR),
+                      dtype=np.float32)[:h, :w]
 
 
 @contextmanager
@@ -256,9 +262,10 @@ def _detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, project
     marker_cam = np.concatenate([camera.rays(c)[:, :2] for c in markers.values()])
     f = camera.fx
     method = cv2.RANSAC if len(markers) >= 2 else 0
-    H, _ = cv2.findHomography(marker_proj, marker_cam, method, 4.0 / f)
-    if H is None:
+    found_H, _ = cv2.findHomography(marker_proj, marker_cam, method, 4.0 / f)
+    if found_H is None:
         return _empty(camera_name, "the pattern's markers do not form a consistent view", len(markers))
+    H = np.asarray(found_H, dtype=np.float64)
 
     s = pattern.square_px
     scale = float(np.clip(max(pattern.camera_px_per_projector_px, MIN_RECT_SQUARE_PX / s), 0.1, 1.5))
@@ -321,7 +328,7 @@ def _detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, project
         if H_new is None:
             break
         converged = np.array_equal(accepted, previous)
-        H = H_new
+        H = np.asarray(H_new, dtype=np.float64)
         max_shift = limits.MAX_CORNER_SHIFT_REFINED_PX  # H fitted to refined corners predicts sub-pixel
         if converged:
             break

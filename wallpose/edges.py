@@ -156,7 +156,7 @@ def find_wall_edges(cameras: Sequence[CameraImage], T_room_from_walls: Sequence[
     robot frame, T_true ≈ T_room_from_robot · exp(δ), sizing the search windows; gamma: the cameras' encoding
     (grey = 255·light^(1/gamma)); projector: when it was on, the stretches it lights are left out.
     Returns the edges found."""
-    walls = [(np.asarray(T), tuple(s)) for T, s in zip(T_room_from_walls, sizes_m, strict=True)]
+    walls = [(np.asarray(T), (float(s[0]), float(s[1]))) for T, s in zip(T_room_from_walls, sizes_m, strict=True)]
     others = [w for k, w in enumerate(walls) if k != wall]
     rng = np.random.default_rng(seed)
     found = []

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 from geometry.poses import rotation_angle_deg
 from wallpose import limits
 from wallpose.detect import Detection, detect
-from wallpose.evidence import NotEnoughEvidenceError
+from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
 from wallpose.pattern import CheckerPattern
 from wallpose.plane import PROJ_TRANS, MLFit, MLModel, ViewData, fit_ml, plane_in_frame, ransac_plane
 from wallpose.rig import ViewRig
@@ -109,10 +109,10 @@ def estimate_from_detections(det_l: Detection, det_r: Detection, pattern: Checke
     right = _view_data(det_r, n, T_rl, views.camera_right.fx)
     both = left.seen & right.seen
     if det_l.count == 0 and det_r.count == 0:
-        raise NotEnoughEvidenceError("no_pattern",
+        raise NotEnoughEvidenceError(EvidenceCode.NO_PATTERN,
                                      f"the pattern was not found ({_describe(det_l)}; {_describe(det_r)})")
     if both.sum() < limits.MIN_CORNERS:
-        raise NotEnoughEvidenceError("too_few_corners",
+        raise NotEnoughEvidenceError(EvidenceCode.TOO_FEW_CORNERS,
                                 f"only {both.sum()} corners are seen by both cameras, {limits.MIN_CORNERS} needed "
                                 f"({_describe(det_l)}; {_describe(det_r)})",
                                 "aim the projector at a free part of the wall")
@@ -121,7 +121,8 @@ def estimate_from_detections(det_l: Detection, det_r: Detection, pattern: Checke
     rng = np.random.default_rng(seed)
     p0, inl = ransac_plane(points, left.normalized[both], right.normalized[both], T_rl, views.camera_right.fx, rng)
     if inl.sum() < limits.MIN_CORNERS:
-        raise NotEnoughEvidenceError("not_one_plane", f"no plane holds {limits.MIN_CORNERS} of the {both.sum()} "
+        raise NotEnoughEvidenceError(EvidenceCode.NOT_ONE_PLANE,
+                                     f"no plane holds {limits.MIN_CORNERS} of the {both.sum()} "
                                      "corners seen by both cameras", "is the pattern on a flat wall?")
     inliers0 = np.zeros(n, dtype=bool)
     inliers0[idx_both[inl]] = True
@@ -136,12 +137,13 @@ def estimate_from_detections(det_l: Detection, det_r: Detection, pattern: Checke
     used = int(fit.inliers.sum())
     warnings = det_l.warnings + det_r.warnings
     if used < limits.MIN_CORNERS:
-        raise NotEnoughEvidenceError("too_few_corners", f"only {used} corners agree with one plane")
+        raise NotEnoughEvidenceError(EvidenceCode.TOO_FEW_CORNERS, f"only {used} corners agree with one plane")
     if used < limits.MIN_INLIER_FRACTION * matched:
-        raise NotEnoughEvidenceError("not_one_plane", f"only {used} of {matched} corners lie on one plane",
+        raise NotEnoughEvidenceError(EvidenceCode.NOT_ONE_PLANE, f"only {used} of {matched} corners lie on one plane",
                                 "the pattern spans several surfaces; aim it at one wall")
     if fit.sigma_px > limits.MAX_RMS_PX:
-        raise NotEnoughEvidenceError("views_disagree", f"the corners disagree with the calibrated geometry by "
+        raise NotEnoughEvidenceError(EvidenceCode.VIEWS_DISAGREE,
+                                     f"the corners disagree with the calibrated geometry by "
                                 f"{fit.sigma_px:.2f} px (at most {limits.MAX_RMS_PX} px expected)",
                                 "keep the robot still between the two images, or recalibrate")
     _check_views_agree(model, fit)
@@ -184,8 +186,9 @@ def _check_views_agree(model: MLModel, fit: MLFit) -> None:
     groups = {"projector pose": z[0:6], "left camera": z[6:12], "right camera": z[12:18], "projector image": z[18:24]}
     worst = max(groups, key=lambda g: float(groups[g].max()))
     if z.max() > limits.MAX_NUISANCE_SIGMAS:
-        raise NotEnoughEvidenceError("views_disagree", f"the images disagree with the calibrated rig: the "
-                                     f"{worst} needs a correction of {z.max():.1f} σ",
+        code = EvidenceCode.PROJECTOR_POSE_OFF if worst == "projector pose" else EvidenceCode.VIEWS_DISAGREE
+        raise NotEnoughEvidenceError(code, f"the images disagree with the calibrated rig: the {worst} needs a "
+                                     f"correction of {z.max():.1f} σ",
                                      "did the robot or the head move between the two images? take both at once; "
                                      "otherwise recalibrate")
     for k in range(2):
@@ -196,7 +199,8 @@ def _check_views_agree(model: MLModel, fit: MLFit) -> None:
     d2 = float(diff @ np.linalg.solve(cov_l[:3, :3] + cov_r[:3, :3], diff))
     ratio = fit.sigma_px / max(np.sqrt(0.5 * (sigma_l ** 2 + sigma_r ** 2)), limits.SIGMA_FLOOR_PX)
     if d2 > limits.CHI2_3_999 or ratio > limits.MAX_NOISE_RATIO:
-        raise NotEnoughEvidenceError("views_disagree", f"the left and right images do not show the same wall pose "
+        raise NotEnoughEvidenceError(EvidenceCode.VIEWS_DISAGREE,
+                                     f"the left and right images do not show the same wall pose "
                                      f"(Mahalanobis² {d2:.1f}, joint/single noise ratio {ratio:.1f})",
                                      "did the robot or the head move between the two images? take both at once")
 
@@ -236,7 +240,8 @@ def _result(model: MLModel, fit: MLFit, pattern: CheckerPattern, views: ViewRig,
         corners_right=int((fit.inliers & model.views[1].seen).sum()), inlier_ids=np.nonzero(fit.inliers)[0],
         warnings=warnings)
     if normal_95 > limits.MAX_NORMAL_95_DEG or estimate.centre_distance_95_m > limits.MAX_DISTANCE_95_M:
-        raise NotEnoughEvidenceError("too_uncertain", f"the corners found constrain the wall only to ±{normal_95:.2f}° "
+        raise NotEnoughEvidenceError(EvidenceCode.TOO_UNCERTAIN,
+                                     f"the corners found constrain the wall only to ±{normal_95:.2f}° "
                                 f"and ±{1000 * estimate.centre_distance_95_m:.1f} mm ({estimate.corners} corners)",
                                 "make more of the pattern visible to both cameras")
     return estimate

@@ -274,7 +274,7 @@ def _linearize(model: MLModel, theta: NDArray[np.float64], sigma: float, mask: N
 
 def _solve(J: NDArray[np.float64], r: NDArray[np.float64]) -> NDArray[np.float64]:
     """Gauss–Newton step from the normal equations (the priors keep them well conditioned)."""
-    return np.linalg.solve(J.T @ J, -(J.T @ r))
+    return np.asarray(np.linalg.solve(J.T @ J, -(J.T @ r)), dtype=np.float64)
 
 
 def fit_ml(model: MLModel, p0: NDArray[np.float64], inliers: NDArray[np.bool_],

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,7 +24,7 @@ from geometry.poses import invert, make_pose, transform_points
 from wallpose import limits
 from wallpose.edges import CameraImage, EdgeObservation, Projector, find_wall_edges, project_undistorted
 from wallpose.estimate import PlaneEstimate
-from wallpose.evidence import NotEnoughEvidenceError
+from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
 from wallpose.plane import rotations
 
 POSE_ITERATIONS = 6
@@ -142,7 +143,7 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
         for gate in gates:
             for _ in range(POSE_ITERATIONS):
                 r = residuals(delta, gate)
-                J = _numeric_jacobian(lambda d, gate=gate: residuals(d, gate), delta, r)
+                J = _numeric_jacobian(partial(residuals, gate=gate), delta, r)
                 step = np.linalg.solve(J.T @ J, -(J.T @ r))
                 delta = delta + step
                 if np.linalg.norm(step) < 1e-10:
@@ -256,7 +257,8 @@ def _check_innovation(whiten: NDArray, basis: NDArray, measured: NDArray, T0: ND
     S = cov_z + G @ prior @ G.T
     d2 = float(z0 @ np.linalg.solve(S, z0))
     if d2 > CHI2_3_9999:
-        raise NotEnoughEvidenceError("no_wall_frame", f"the measured plane is not where wall {wall} of the map "
+        raise NotEnoughEvidenceError(EvidenceCode.NO_WALL_FRAME,
+                                     f"the measured plane is not where wall {wall} of the map "
                                      f"should be by the robot's localization (Mahalanobis² {d2:.0f})",
                                      "is the pattern on that wall? check the room map and the localization")
 

@@ -15,11 +15,12 @@ import numpy as np
 
 from arproj.bench import BenchTable, cells, column, columns
 from arproj.console import progress_bar
+from arproj.sim.protocols import SiteTruth
 from arproj.sim.wallpose_trial import LARGE_ROOM, calibrated_views, photograph_pair, true_landing, wall_truth
 from wallpose.baseline import SquarePattern, estimate_plane_baseline
 from wallpose.estimate import estimate_plane
 from wallpose.evidence import NotEnoughEvidenceError
-from wallpose.pattern import choose_pattern
+from wallpose.pattern import CheckerPattern, choose_pattern
 
 DISTANCES_M = (1.0, 2.0, 3.0, 4.0)
 INCIDENCES_DEG = (0.0, 30.0, 45.0, 60.0)
@@ -33,13 +34,13 @@ TARGETS = {2.0: (0.05, 1.0), 4.0: (0.15, 3.0)}   # distance: (median normal erro
 MIN_RATIO, MIN_COVERAGE, MAX_TIME_MS = 5.0, 0.95, 100.0
 
 
-def _square_on_wall(site: object, pattern: object) -> SquarePattern:
+def _square_on_wall(site: SiteTruth, pattern: CheckerPattern) -> SquarePattern:
     """The paper's square, as large as possible but wholly on the wall (chosen with the simulator's truth, in
     the baseline's favour: the paper's operator would aim it so)."""
     fraction = 0.8
     while True:
-        square = SquarePattern.like(pattern, fraction)  # type: ignore[arg-type]
-        landing = site.raycast("projector", square.corners_px)  # type: ignore[attr-defined]
+        square = SquarePattern.like(pattern, fraction)
+        landing = site.raycast("projector", square.corners_px)
         if np.all(landing.wall_index.reshape(-1) == 0) or fraction < 0.1:
             return square
         fraction *= 0.85

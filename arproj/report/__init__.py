@@ -65,6 +65,8 @@ def _figure(out: Path, file: str, caption: str) -> str:
 
 def write_report(ctx: Any) -> Path:
     """Write OUT/report.html from the demo context (figures, pictures, stage records); returns its path."""
+    from arproj.session.robot_io import TRUTH_PRIOR
+
     out: Path = ctx.out
     figures: dict[str, dict[str, Any]] = ctx.figures
     parts = [f"<!doctype html><html lang=en><head><meta charset=utf-8><title>arproj demo — "
@@ -96,12 +98,12 @@ def write_report(ctx: Any) -> Path:
     parts.append("</table>")
     pose = figures.get("wall pose", {})
     source = str(pose.get("in-plane position of the wall frame from", ""))
-    if "truth" in source:
+    if source == TRUTH_PRIOR:
         parts.append("<p class=muted>Note: the wall plane and the projector's pose are measured from the projected "
                      "pattern; the wall frame's in-plane position (along the wall, height, rotation about the "
                      f"normal) comes from “{html.escape(source)}”, as the projection session does on the "
                      "simulated site — the registration figures do not include a localization error.</p>")
-    if "design values" in str(pose.get("rig used", "")):
+    if ctx.design_rig_used:
         parts.append(f"<p class=bad>The calibrated rig failed in the wall pose "
                      f"({html.escape(str(pose.get('calibrated rig failed', '')))}); the projection stages used the "
                      "robot's design values (an uncalibrated rig).</p>")

@@ -9,12 +9,16 @@ registration error of what the person sees.
 from __future__ import annotations
 
 import itertools
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from arproj.session import registration
 from geometry.poses import invert, transform_points
+
+if TYPE_CHECKING:
+    from arproj.sim.protocols import SiteTruth
 
 MARK_SEPARATION_RADII = 4.0   # marks in one frame: centres at least this many (summed) radii apart
 MARK_RADIUS_PX = 2.5          # each mark covers at least this many projector pixels in radius
@@ -62,7 +66,7 @@ def separated_passes(points_px: NDArray[np.float64], radii_px: NDArray[np.float6
     return passes
 
 
-def true_landing_errors(session: object, site: object, marks_xy: NDArray[np.float64],
+def true_landing_errors(session: object, site: SiteTruth, marks_xy: NDArray[np.float64],
                         wall_index: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Render marks at marks_xy (n, 2) with the session's current pose — each a disc of at least
     MARK_RADIUS_PX projector pixels, drawn in passes of well separated marks — find their centroids in the
@@ -92,7 +96,7 @@ def true_landing_errors(session: object, site: object, marks_xy: NDArray[np.floa
         frame = mp.render(reg.T_wall_from_projector)
         found = registration.find_marks(frame, predicted[idx], radius_px[idx])
         ok = np.all(np.isfinite(found), axis=1)
-        truth = site.raycast("projector", found[ok])  # type: ignore[attr-defined]
+        truth = site.raycast("projector", found[ok])
         on_wall = np.asarray(truth.wall_index) == wall_index
         landed = np.asarray(truth.wall_xy, dtype=np.float64)[on_wall]
         errors.append(np.linalg.norm(landed - marks_xy[idx][ok][on_wall], axis=1))

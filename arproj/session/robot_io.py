@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import cv2
 import numpy as np
@@ -22,6 +22,10 @@ from devices.sim import HeadFaults, HeadSimulator
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert
+from geometry.rig import Rig
+
+if TYPE_CHECKING:
+    from arproj.sim.protocols import RobotSite
 
 
 class RobotIO(Protocol):
@@ -44,6 +48,9 @@ class RobotIO(Protocol):
     def close(self) -> None: ...
 
 
+TRUTH_PRIOR = "sim truth (in-plane)"  # SimulatedRobot.wall_prior's source with prior="truth"
+
+
 class SimulatedRobot:
     """The simulated site as the session's robot. The head is commanded over Pelco-D to a HeadSimulator; the
     site's head then moves to the simulator's physical angles (its own bias, noise and backlash on top).
@@ -53,7 +60,7 @@ class SimulatedRobot:
     projection from the wall pose); "localization" uses the robot's noisy localization alone.
     """
 
-    def __init__(self, site: object, wall_index: int, head_sim: HeadSimulator, head: PanTiltHead,
+    def __init__(self, site: RobotSite, wall_index: int, head_sim: HeadSimulator, head: PanTiltHead,
                  output: FrameOutput | None = None, prior: str = "measured") -> None:
         self.site = site
         self.wall_index = int(wall_index)
@@ -62,10 +69,10 @@ class SimulatedRobot:
         self.output = output
         self.prior = prior
         self._synced: tuple[float, float] | None = None
-        self.wall = site.walls[self.wall_index]  # type: ignore[attr-defined]
+        self.wall = site.walls[self.wall_index]
 
     @classmethod
-    def on_site(cls, site: object, wall_index: int = 0, output: FrameOutput | None = None, prior: str = "measured",
+    def on_site(cls, site: RobotSite, wall_index: int = 0, output: FrameOutput | None = None, prior: str = "measured",
                 *, seed: int = 0, head_faults: HeadFaults | None = None, head_speed_deg_s: float | None = None,
                 timeout_s: float = 0.2, retries: int = 3, settle_timeout_s: float = 3.0) -> SimulatedRobot:
         """The robot on `site`, its head a HeadSimulator (seeded; `head_faults` injected; `head_speed_deg_s`,
@@ -73,7 +80,7 @@ class SimulatedRobot:
         Pelco-D on socket:// with these timeouts, as a real head is."""
         speed = {} if head_speed_deg_s is None else {"speed_deg_s": head_speed_deg_s}
         head_sim = HeadSimulator(faults=head_faults, seed=seed, **speed,
-                                 initial_deg=tuple(float(a) for a in site.head_angles_cmd_deg[:2]))  # type: ignore
+                                 initial_deg=tuple(float(a) for a in site.head_angles_cmd_deg[:2]))
         head = PanTiltHead(head_sim.url, timeout_s=timeout_s, retries=retries, settle_timeout_s=settle_timeout_s)
         return cls(site, wall_index, head_sim, head, output, prior)
 
@@ -81,14 +88,14 @@ class SimulatedRobot:
         """Move the site's head to where the simulated head physically is (slip included)."""
         true = self.head_sim.true_deg()
         if self._synced is None or not np.allclose(true, self._synced, atol=1e-9):
-            self.site.set_head([true[0], true[1], 0.0])  # type: ignore[attr-defined]
+            self.site.set_head([true[0], true[1], 0.0])
             self._synced = true
 
     def capture(self, frame: NDArray[np.uint8]) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
         self.sync_head()
         self.show(frame)
-        left = self.site.photograph("camera_left", projector_image=frame).image  # type: ignore[attr-defined]
-        right = self.site.photograph("camera_right", projector_image=frame).image  # type: ignore[attr-defined]
+        left = self.site.photograph("camera_left", projector_image=frame).image
+        right = self.site.photograph("camera_right", projector_image=frame).image
         return left, right
 
     def show(self, frame: NDArray[np.uint8]) -> None:
@@ -96,7 +103,7 @@ class SimulatedRobot:
             self.output.show(frame)
 
     def laser_points(self) -> NDArray[np.float64]:
-        return self.site.laser_scan().points_robot()  # type: ignore[attr-defined]
+        return self.site.laser_scan().points_robot()
 
     def full_pose_inputs(self) -> tuple | None:
         """(room map, wall index, localized T_room_from_robot, σ m, σ deg) for the wall-pose package's full
@@ -105,16 +112,16 @@ class SimulatedRobot:
             return None
         from arproj.sim.wallpose_trial import room_map
 
-        r = self.site.scene["robot"]  # type: ignore[attr-defined]
-        return (room_map(self.site), self.wall_index, self.site.localized_T_room_from_robot,  # type: ignore
+        r = self.site.scene["robot"]
+        return (room_map(self.site), self.wall_index, self.site.localized_T_room_from_robot,
                 float(r["localization_sigma_m"]), float(r["localization_sigma_deg"]))
 
     def wall_prior(self) -> tuple[NDArray[np.float64], float, str]:
         T_wall_from_room = invert(self.wall.T_room_from_wall)
         if self.prior == "truth":
-            return T_wall_from_room @ self.site.T_room_from_robot, 0.0, "sim truth (in-plane)"  # type: ignore
-        sigma = float(self.site.scene["robot"]["localization_sigma_m"])  # type: ignore[attr-defined]
-        return T_wall_from_room @ self.site.localized_T_room_from_robot, sigma, "localization"  # type: ignore
+            return T_wall_from_room @ self.site.T_room_from_robot, 0.0, TRUTH_PRIOR
+        sigma = float(self.site.scene["robot"]["localization_sigma_m"])
+        return T_wall_from_room @ self.site.localized_T_room_from_robot, sigma, "localization"
 
     def close(self) -> None:
         self.head.close()
@@ -207,14 +214,12 @@ class HardwareRobot:
         self.output.close()
 
 
-def nominal_rig(site: object) -> object:
+def nominal_rig(site: RobotSite) -> Rig:
     """A rig from the simulated site's DESIGN values (nominal head without its angle bias, exact cameras):
     what a robot is before calibration. Used only when no calibrated rig is available; the session's
     pattern-based estimate measures the projector's true pose on top of it."""
-    from geometry.rig import Rig
-
-    return Rig(intrinsics={"camera_left": site.camera_left, "camera_right": site.camera_right,  # type: ignore
-                           "projector": site.projector},  # type: ignore[attr-defined]
-               poses={"T_robot_from_camera_left": site.T_robot_from_camera_left,  # type: ignore
-                      "T_camera_right_from_camera_left": site.T_camera_right_from_camera_left},  # type: ignore
+    return Rig(intrinsics={"camera_left": site.camera_left, "camera_right": site.camera_right,
+                           "projector": site.projector},
+               poses={"T_robot_from_camera_left": site.T_robot_from_camera_left,
+                      "T_camera_right_from_camera_left": site.T_camera_right_from_camera_left},
                head=site.head_nominal, quality={"source": "simulated site design values (not calibrated)"})

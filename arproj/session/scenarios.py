@@ -17,6 +17,7 @@ detection, whose accuracy the end-to-end registration measurement covers separat
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,6 +27,9 @@ from arproj.session import tolerances as tol
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, make_pose, transform_points
 from geometry.rig import Rig
+
+if TYPE_CHECKING:
+    from arproj.sim.protocols import SiteTruth
 
 CENTROID_NOISE_PX = 0.05  # σ of a check mark's centroid in a camera image (measured on the simulated site)
 
@@ -47,12 +51,11 @@ class Truth:
         return self.T_wall_from_robot @ self.T_robot_from_projector
 
 
-def truth_of(site: object, wall_index: int) -> Truth:
+def truth_of(site: SiteTruth, wall_index: int) -> Truth:
     s = site
-    T_wall_from_room = invert(s.walls[wall_index].T_room_from_wall)  # type: ignore[attr-defined]
-    return Truth(T_wall_from_room @ s.T_room_from_robot, s.T_robot_from_projector,  # type: ignore[attr-defined]
-                 s.projector, s.camera_left, s.camera_right,  # type: ignore[attr-defined]
-                 s.T_robot_from_camera_left, s.T_camera_right_from_camera_left)  # type: ignore[attr-defined]
+    T_wall_from_room = invert(s.walls[wall_index].T_room_from_wall)
+    return Truth(T_wall_from_room @ s.T_room_from_robot, s.T_robot_from_projector, s.projector, s.camera_left,
+                 s.camera_right, s.T_robot_from_camera_left, s.T_camera_right_from_camera_left)
 
 
 @dataclass

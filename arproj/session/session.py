@@ -32,6 +32,7 @@ from geometry.poses import invert, make_pose, transform_points
 from geometry.rig import Rig
 from wallpose.edges import camera_images
 from wallpose.estimate import PlaneEstimate, Uncertainty, estimate_plane
+from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
 from wallpose.pattern import choose_pattern
 from wallpose.pose import estimate_wall_pose
 from wallpose.rig import ViewRig
@@ -70,6 +71,11 @@ def _quality(rig: Rig, section: str, key: str) -> float:
         return float(value) if value is not None else 0.0
     except (TypeError, ValueError):
         return 0.0
+
+
+def _why_declined(err: InputError) -> str:
+    """Why the wall pose failed, for the log and pose_failure: the estimator's reason, or the input error."""
+    return err.reason if isinstance(err, NotEnoughEvidenceError) else err.message
 
 
 def check_rig(rig: Rig) -> None:
@@ -220,8 +226,8 @@ class ProjectionSession:
             self.last_pattern_capture = (pattern, left, right, head)
             try:
                 plane = estimate_plane(left, right, pattern, views, uncertainty=self._uncertainty())
-            except InputError as err:
-                if getattr(err, "code", None) != "views_disagree" or "projector pose" not in err.message:
+            except NotEnoughEvidenceError as err:
+                if err.code != EvidenceCode.PROJECTOR_POSE_OFF:
                     raise
                 # The head model misplaces the projector (head re-mounted, head calibration off): measure the
                 # projector's pose from the pattern itself; the closed loop and the gate still judge the result.
@@ -231,7 +237,7 @@ class ProjectionSession:
                                 f"{plane.projector_correction_deg:.2f}° / {plane.projector_correction_m * 1000:.1f} mm "
                                 "off): its pose was measured from the pattern instead — recalibrate the head")
         except InputError as err:  # the estimator's "not enough evidence" (or pictures that do not fit the rig)
-            self.pose_failure = err.message.replace("not enough evidence for the wall pose: ", "")
+            self.pose_failure = _why_declined(err)
             self.log.append(f"wall pose: {self.pose_failure}")
             return None
         scan = self.robot.laser_points()
@@ -239,7 +245,7 @@ class ProjectionSession:
             T_wall_from_robot, T_robot_from_projector, in_plane_sigma, roll_sigma_rad, fused = \
                 self.pose_from_plane(plane, views, scan, (left, right))
         except InputError as err:
-            self.pose_failure = err.message.replace("not enough evidence for the wall pose: ", "")
+            self.pose_failure = _why_declined(err)
             self.log.append(f"wall pose: {self.pose_failure}")
             return None
         if fused:

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from arproj.sim.protocols import RobotSite, SiteTruth
 from geometry.head import HeadModel
 from geometry.poses import invert, transform_points
 from wallpose.pose import RoomMap
@@ -30,50 +31,48 @@ class WallTruth:
     T_robot_from_projector: NDArray[np.float64]
 
 
-def room_map(site: object) -> RoomMap:
+def room_map(site: SiteTruth) -> RoomMap:
     """The site's walls as the full wall-pose estimate takes them (a real robot's come from a room survey)."""
-    walls = site.walls  # type: ignore[attr-defined]
+    walls = site.walls
     return RoomMap([np.asarray(w.T_room_from_wall) for w in walls], [(w.width_m, w.height_m) for w in walls])
 
 
-def calibrated_views(site: object) -> ViewRig:
+def calibrated_views(site: RobotSite) -> ViewRig:
     """The rig as a perfect calibration would know it: true intrinsics, camera poses and head kinematics with
     its angle bias, at the commanded angles. What stays unknown is the head's repeatability (angle noise and
     backlash), as on a real robot."""
-    head: HeadModel = site.head  # type: ignore[attr-defined]
+    head = site.head
     calibrated = HeadModel(axes=head.axes, points=head.points,
                            T_robot_from_projector_zero=head.T_robot_from_projector_zero,
-                           zero_offsets_deg=np.asarray(site.head_angle_bias_deg))  # type: ignore[attr-defined]
-    return ViewRig(camera_left=site.camera_left, camera_right=site.camera_right,  # type: ignore[attr-defined]
-                   projector=site.projector,  # type: ignore[attr-defined]
-                   T_robot_from_camera_left=site.T_robot_from_camera_left,  # type: ignore[attr-defined]
-                   T_camera_right_from_camera_left=site.T_camera_right_from_camera_left,  # type: ignore[attr-defined]
-                   T_robot_from_projector=calibrated.T_robot_from_projector(
-                       site.head_angles_cmd_deg))  # type: ignore[attr-defined]
+                           zero_offsets_deg=np.asarray(site.head_angle_bias_deg))
+    return ViewRig(camera_left=site.camera_left, camera_right=site.camera_right, projector=site.projector,
+                   T_robot_from_camera_left=site.T_robot_from_camera_left,
+                   T_camera_right_from_camera_left=site.T_camera_right_from_camera_left,
+                   T_robot_from_projector=calibrated.T_robot_from_projector(site.head_angles_cmd_deg))
 
 
-def wall_truth(site: object, wall: int = 0) -> WallTruth:
-    T_robot_from_room = invert(site.T_room_from_robot)  # type: ignore[attr-defined]
-    T_robot_from_wall = T_robot_from_room @ site.walls[wall].T_room_from_wall  # type: ignore[attr-defined]
+def wall_truth(site: SiteTruth, wall: int = 0) -> WallTruth:
+    T_robot_from_room = invert(site.T_room_from_robot)
+    T_robot_from_wall = T_robot_from_room @ site.walls[wall].T_room_from_wall
     n = T_robot_from_wall[:3, 2].copy()
     return WallTruth(n, float(-n @ T_robot_from_wall[:3, 3]), invert(T_robot_from_wall),
-                     np.asarray(site.T_robot_from_projector).copy())  # type: ignore[attr-defined]
+                     np.asarray(site.T_robot_from_projector).copy())
 
 
-def true_landing(site: object, projector_px: NDArray[np.float64]) -> NDArray[np.float64]:
+def true_landing(site: SiteTruth, projector_px: NDArray[np.float64]) -> NDArray[np.float64]:
     """(n, 3) robot-frame points where projector pixels (n, 2) really land (NaN where on nothing)."""
-    truth = site.raycast("projector", np.asarray(projector_px, dtype=np.float64).reshape(-1, 2))  # type: ignore
+    truth = site.raycast("projector", np.asarray(projector_px, dtype=np.float64).reshape(-1, 2))
     points = truth.points_room.reshape(-1, 3)
-    return transform_points(invert(site.T_room_from_robot), points)  # type: ignore[attr-defined]
+    return transform_points(invert(site.T_room_from_robot), points)
 
 
 AUTO_EXPOSURE_LEVEL = 0.75      # the brightest pattern pixels (99.5th percentile) land at this fraction of full well
 AUTO_EXPOSURE_MAX_GAIN = 4.0    # never expose longer than this many times the scene's default
 
 
-def metered_exposure(site: object, camera: str, radiance: NDArray[np.float32]) -> float:
+def metered_exposure(site: RobotSite, camera: str, radiance: NDArray[np.float32]) -> float:
     """Exposure time (s) that puts the brightest part of the lit pattern just below clipping (auto exposure)."""
-    model = site.camera_models[camera]  # type: ignore[attr-defined]
+    model = site.camera_models[camera]
     signal = radiance[..., :3] @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
     bright = float(np.percentile(signal[signal > 0], 99.5)) if np.any(signal > 0) else 0.0
     if bright <= 0:
@@ -82,7 +81,7 @@ def metered_exposure(site: object, camera: str, radiance: NDArray[np.float32]) -
     return float(min(exposure, AUTO_EXPOSURE_MAX_GAIN * model.exposure_s))
 
 
-def photograph_pair(site: object, projector_image: NDArray[np.uint8], rng: np.random.Generator,
+def photograph_pair(site: RobotSite, projector_image: NDArray[np.uint8], rng: np.random.Generator,
                     exposure_gain: float = 1.0, auto_exposure: bool = True) -> tuple[NDArray, NDArray]:
     """Both cameras' photos of the projector showing projector_image, each rendered once.
 
@@ -90,8 +89,8 @@ def photograph_pair(site: object, projector_image: NDArray[np.uint8], rng: np.ra
     multiplies the result (e.g. 8 for an over-exposed shot). Sensor noise is drawn from rng."""
     images = []
     for camera in ("camera_left", "camera_right"):
-        radiance = site.render_radiance(camera, projector_image)  # type: ignore[attr-defined]
-        model = site.camera_models[camera]  # type: ignore[attr-defined]
+        radiance = site.render_radiance(camera, projector_image)
+        model = site.camera_models[camera]
         exposure = metered_exposure(site, camera, radiance) if auto_exposure else model.exposure_s
         images.append(model.develop(radiance, exposure * exposure_gain, rng))
     return images[0], images[1]

@@ -24,7 +24,7 @@ class SimDevice:
     """What a DeviceServer serves. Subclasses set `name` and `framer` and implement handle()."""
 
     name = "device"
-    framer: Callable[[], Framer[Any]]  # a fresh framer per connection
+    framer: Callable[[], Framer[Any, Any]]  # a fresh framer per connection
 
     def greeting(self) -> list[Any]:
         """Frames sent when a host connects (GRBL's banner), without faults."""

@@ -158,6 +158,19 @@ def test_vertex_coloured_mesh_and_alpha(gl_context: moderngl.Context) -> None:
     assert tuple(rgba[2, 2]) == (0, 0, 0, 0)
 
 
+def test_untextured_material_is_drawn_in_its_colour(gl_context: moderngl.Context) -> None:
+    # a GLB mesh with a PBR material but no texture image: TextureVisuals without UVs (once an AttributeError)
+    mesh = trimesh.Trimesh(vertices=[[-1, -1, 0], [1, -1, 0], [0, 1, 0]], faces=[[0, 1, 2]], process=False,
+                           visual=trimesh.visual.TextureVisuals(
+                               material=trimesh.visual.material.PBRMaterial(baseColorFactor=[0, 200, 0, 255])))
+    intr = Intrinsics(100, 100, 31.5, 31.5, 64, 64)
+    with MeshRenderer(ctx=gl_context) as r:
+        r.set_mesh(mesh)
+        rgb = r.render(intr, look_at([0, 0, 3], [0, 0, 0], up=[0, 1, 0])).color
+    assert tuple(rgb[32, 32]) == (0, 200, 0)
+    assert tuple(rgb[2, 2]) == (0, 0, 0)
+
+
 def test_every_gpu_object_is_released(gl_context: moderngl.Context) -> None:
     renderer = MeshRenderer(ctx=gl_context)
     renderer.set_mesh(checkerboard_mesh())

@@ -2,6 +2,7 @@
 to the full pose (the position along the wall) when the laser is left out and the localization is off."""
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -13,6 +14,9 @@ from wallpose.estimate import PlaneEstimate, estimate_plane
 from wallpose.pattern import choose_pattern
 from wallpose.pose import RoomMap, estimate_wall_pose
 from wallpose.rig import ViewRig
+
+if TYPE_CHECKING:
+    from arproj.sim import Site
 
 pytestmark = pytest.mark.gl
 
@@ -35,17 +39,16 @@ class Shot:
     localized: np.ndarray
 
 
-def _shot(site: object, distance: float, incidence: float, along: float, seed: int) -> Shot:
-    site.place_robot(distance, incidence, along_m=along, aim_height_m=1.1)  # type: ignore[attr-defined]
+def _shot(site: "Site", distance: float, incidence: float, along: float, seed: int) -> Shot:
+    site.place_robot(distance, incidence, along_m=along, aim_height_m=1.1)
     views = calibrated_views(site)
     pattern = choose_pattern(views, distance, incidence)
     left, right = photograph_pair(site, pattern.image(), np.random.default_rng(seed))
     plane = estimate_plane(left, right, pattern, views)
     return Shot(views, camera_images(views, left, right), plane,
                 views.T_robot_from_camera_left @ plane.T_camera_left_from_projector, room_map(site),
-                site.T_room_from_robot.copy(),  # type: ignore[attr-defined]
-                {c: site.T_room_from(c) for c in ("camera_left", "camera_right")},  # type: ignore[attr-defined]
-                site.localized_T_room_from_robot.copy())  # type: ignore[attr-defined]
+                site.T_room_from_robot.copy(), {c: site.T_room_from(c) for c in ("camera_left", "camera_right")},
+                site.localized_T_room_from_robot.copy())
 
 
 @pytest.fixture(scope="module")

@@ -4,8 +4,8 @@ import pytest
 from geometry.poses import invert, rotation_angle_deg
 from wallpose import limits
 from wallpose.detect import detect
-from wallpose.estimate import estimate_plane
-from wallpose.evidence import NotEnoughEvidenceError
+from wallpose.estimate import Uncertainty, estimate_plane
+from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
 
 from .conftest import make_case
 
@@ -105,4 +105,21 @@ def test_robot_moved_between_the_images_is_declined(case_2m_30) -> None:
     with pytest.raises(NotEnoughEvidenceError) as err:
         estimate_plane(left, right, case_2m_30.pattern, case_2m_30.views)
     # The pattern is still one plane with every corner found: only the views' disagreement can tell.
-    assert err.value.code == "views_disagree" and "move" in str(err.value)
+    assert err.value.code == EvidenceCode.VIEWS_DISAGREE and "move" in str(err.value)
+
+
+def test_projector_off_its_prior_is_its_own_case_and_measurable() -> None:
+    # the projector 2° from where the rig puts it (a head re-mounted): beyond its prior, the cameras agree
+    case = make_case(2.0, 30.0, seed=1, head_error_deg=2.0)
+    photos = case.photos()
+    with pytest.raises(NotEnoughEvidenceError) as err:
+        estimate_plane(*photos, case.pattern, case.views)
+    assert err.value.code == EvidenceCode.PROJECTOR_POSE_OFF
+    assert err.value.code == "projector_pose_off"  # the value programs and tables see
+    # with a prior that admits it, the pattern measures the projector's pose, and the plane is right
+    est = estimate_plane(*photos, case.pattern, case.views,
+                         uncertainty=Uncertainty(projector_rotation_deg=10.0, projector_translation_m=0.05))
+    _assert_right(est, case)
+    T_true = invert(case.views.T_robot_from_camera_left) @ case.scene.T_robot_from_projector_true
+    assert rotation_angle_deg(est.T_camera_left_from_projector, T_true) < 0.05
+    assert abs(est.projector_correction_deg - 2.0) < 0.05

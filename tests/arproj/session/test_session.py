@@ -17,11 +17,12 @@ from scanner.wall import shipped_walls
 pytestmark = pytest.mark.gl
 
 
-@pytest.fixture
-def running(gl_context):
-    """A fresh site and session for each test: the tests nudge the robot and slip the head, so none may see
-    another's changes (about 3.5 s each)."""
+def _start(gl_context, head_zero_error_deg=(0.0, 0.0)):
+    """A fresh site and a session on it, aimed and updated once; the rig's head model may be off by
+    head_zero_error_deg (pan, tilt zero offsets)."""
     from arproj.sim.site import Site
+    from geometry.head import HeadModel
+    from geometry.rig import Rig
 
     site = Site.build(seed=3, ctx=gl_context, robot={"distance_m": 2.2, "incidence_deg": 20.0})
     head_sim = HeadSimulator(speed_deg_s=600.0, initial_deg=tuple(site.head_angles_cmd_deg[:2]))
@@ -29,13 +30,26 @@ def running(gl_context):
     out = MemoryOutput()
     robot = SimulatedRobot(site, 0, head_sim, head, out)
     wall_map = wall_map_from_wall_file(shipped_walls()["demo_brick_wall"])
-    session = ProjectionSession(nominal_rig(site), wall_map, robot, ctx=gl_context)
+    rig = nominal_rig(site)
+    if any(head_zero_error_deg):
+        h = rig.head
+        offsets = h.zero_offsets_deg + np.array([*head_zero_error_deg, 0.0])
+        rig = Rig(rig.intrinsics, rig.poses, HeadModel(h.axes, h.points, h.T_robot_from_projector_zero, offsets),
+                  rig.quality)
+    session = ProjectionSession(rig, wall_map, robot, ctx=gl_context)
     session.aim_at([1.3, 1.1])
     session.set_drill_point([1.5, 1.2])
-    decision = session.update()
+    return site, head_sim, session, out, session.update()
+
+
+@pytest.fixture
+def running(gl_context):
+    """A fresh site and session for each test: the tests nudge the robot and slip the head, so none may see
+    another's changes (about 3.5 s each)."""
+    site, head_sim, session, out, decision = _start(gl_context)
     yield site, head_sim, session, out, decision
     session.close()
-    robot.close()
+    session.robot.close()
 
 
 def _marks(session):
@@ -58,6 +72,21 @@ def test_registered_map_lands_within_two_millimetres(running):
     frame = out.last
     assert frame.shape == (800, 1280, 3) and frame[:, :, 0].max() == 255  # the map with its legend
     assert "safe" in session.drill_check([1.5, 1.2]).message
+
+
+def test_head_model_off_is_measured_from_the_pattern(gl_context):
+    # a rig whose head model puts the projector 1-2° off: the estimator declines with projector_pose_off, and
+    # the session measures the projector's pose from the pattern instead, still landing the map
+    site, _, session, _, decision = _start(gl_context, head_zero_error_deg=(1.5, -1.0))
+    try:
+        assert decision.show_map, decision.reasons
+        assert any(line.startswith("head model disagrees with the pattern") for line in session.log)
+        errors, _ = true_landing_errors(session, site, _marks(session), 0)
+        assert len(errors) >= 15
+        assert errors.mean() < 0.002 and np.percentile(errors, 95) < 0.004
+    finally:
+        session.close()
+        session.robot.close()
 
 
 def test_head_slip_is_caught_and_healed_by_re_estimating(running):
