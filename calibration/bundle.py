@@ -16,9 +16,9 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.optimize._numdiff import approx_derivative, group_columns
 
-from calibration.camera_model import DISTORTION_MODELS, dist5_from, project, rodrigues_batch
+from calibration.camera_model import DISTORTION_MODELS, dist5_from, project
 from geometry.intrinsics import Intrinsics
-from geometry.poses import pose_from_rvec_tvec, rvec_tvec_from_pose
+from geometry.poses import pose_from_rvec_tvec, rotation_matrices, rotation_matrix, rvec_tvec_from_pose
 
 BA_TOLERANCE = 1e-10
 BA_MAX_EVALUATIONS = 200
@@ -87,14 +87,14 @@ class _Problem:
 
     def residual_blocks(self, x: NDArray[np.float64]) -> list[tuple[list[int], NDArray[np.float64]]]:
         poses = x[self.pose_offset:].reshape(self.n_views, 6)
-        R_views = rodrigues_batch(poses[:, :3])
+        R_views = rotation_matrices(poses[:, :3])
         out = []
         for cam, idx, view_index, obj, img in self.groups:
             fx, fy, cx, cy, d = self.camera_params(x, cam)
             p = np.einsum("nij,nj->ni", R_views[view_index], obj) + poses[view_index, 3:]
             if cam == 1:
                 s = x[self.stereo_offset:self.stereo_offset + 6]
-                p = p @ rodrigues_batch(s[:3])[0].T + s[3:]
+                p = p @ rotation_matrix(s[:3]).T + s[3:]
             out.append((idx, project(p, fx, fy, cx, cy, d) - img))
         return out
 

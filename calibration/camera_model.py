@@ -1,7 +1,8 @@
-"""Pinhole + Brown-Conrady projection in numpy (OpenCV's model, k1 k2 p1 p2 k3), for the bundle adjustments.
+"""The calibration's camera models (which of OpenCV's k1 k2 p1 p2 k3 each lets free) and its projection.
 
-A vectorised projection lets scipy's least_squares refine many views at once without a Python loop per view;
-`tests/calibration/test_camera_model.py` checks it against cv2.projectPoints.
+The projection is geometry.distortion's numpy form of OpenCV's model: vectorised, it lets scipy's least_squares
+refine many views at once without a Python loop per view; `tests/calibration/test_camera_model.py` checks it
+against cv2.projectPoints.
 """
 
 from __future__ import annotations
@@ -9,6 +10,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
+from geometry.distortion import distort_normalized
 
 # Which of OpenCV's five coefficients (k1, k2, p1, p2, k3) each model lets free; the others stay zero.
 DISTORTION_MODELS: dict[str, tuple[int, ...]] = {
@@ -19,33 +22,6 @@ DISTORTION_MODELS: dict[str, tuple[int, ...]] = {
     "k1k2p1p2": (0, 1, 2, 3),
     "k1k2p1p2k3": (0, 1, 2, 3, 4),
 }
-
-
-def rodrigues_batch(rvecs: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotation matrices (n, 3, 3) from rotation vectors (n, 3)."""
-    rvecs = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
-    theta = np.linalg.norm(rvecs, axis=1)
-    small = theta < 1e-12
-    safe = np.where(small, 1.0, theta)
-    k = rvecs / safe[:, None]
-    K = np.zeros((len(k), 3, 3))
-    K[:, 0, 1], K[:, 0, 2] = -k[:, 2], k[:, 1]
-    K[:, 1, 0], K[:, 1, 2] = k[:, 2], -k[:, 0]
-    K[:, 2, 0], K[:, 2, 1] = -k[:, 1], k[:, 0]
-    s = np.where(small, 0.0, np.sin(theta))[:, None, None]
-    c = np.where(small, 0.0, 1.0 - np.cos(theta))[:, None, None]
-    return np.eye(3)[None] + s * K + c * (K @ K)
-
-
-def distort_normalized(xy: NDArray[np.float64], dist5: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Apply (k1, k2, p1, p2, k3) to normalised coordinates (..., 2)."""
-    k1, k2, p1, p2, k3 = dist5
-    x, y = xy[..., 0], xy[..., 1]
-    r2 = x * x + y * y
-    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    return np.stack([xd, yd], axis=-1)
 
 
 def project(points_cam: NDArray[np.float64], fx: float, fy: float, cx: float, cy: float,

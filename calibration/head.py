@@ -22,7 +22,15 @@ from scipy.optimize import least_squares
 
 from geometry.errors import InputError
 from geometry.head import HeadModel
-from geometry.poses import invert, make_pose, rotation_about, rotation_angle_deg
+from geometry.poses import (
+    invert,
+    make_pose,
+    rotation_about,
+    rotation_angle_deg,
+    rotation_matrix,
+    rotation_vector,
+    rotation_vectors,
+)
 
 ROTATION_WEIGHT_M = 1.0
 MIN_HEAD_POSES = 7
@@ -73,13 +81,6 @@ def _perp_basis(a: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np
     return e1, np.cross(a, e1)
 
 
-def _log_rotation(R: NDArray[np.float64]) -> NDArray[np.float64]:
-    import cv2
-
-    v, _ = cv2.Rodrigues(np.asarray(R, dtype=np.float64))
-    return np.asarray(v, dtype=np.float64).ravel()
-
-
 def _initial_model(angles: list[NDArray[np.float64]], poses: list[NDArray[np.float64]],
                    nominal: HeadModel | None) -> HeadModel:
     """Axes and points from poses where one joint moved alone from a reference pose (else the nominal model).
@@ -101,7 +102,7 @@ def _initial_model(angles: list[NDArray[np.float64]], poses: list[NDArray[np.flo
         estimates, pts = [], []
         for k in moves:
             M = poses[k] @ invert(T_ref)  # rotation about joint j's line
-            v = _log_rotation(M[:3, :3])
+            v = rotation_vector(M[:3, :3])
             angle = np.linalg.norm(v)
             if angle < 1e-6:
                 continue
@@ -151,19 +152,17 @@ def fit_head(angles_deg: list[ArrayLike], T_base_from_projector: list[NDArray[np
             a = init.axes[j] + x[4 * j] * e1 + x[4 * j + 1] * e2
             axes[j] = a / np.linalg.norm(a)
             points[j] = init.points[j] + x[4 * j + 2] * e1 + x[4 * j + 3] * e2
-        dR = rotation_about(x[12:15], float(np.linalg.norm(x[12:15]))) if np.linalg.norm(x[12:15]) > 0 else np.eye(3)
+        dR = rotation_matrix(x[12:15])
         T0 = init.T_robot_from_projector_zero
         T_zero = make_pose(dR @ T0[:3, :3], T0[:3, 3] + x[15:18])
         return HeadModel(axes, points, T_zero)
 
     def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
         m = model_from(x)
-        out = []
-        for a, T in zip(angles, poses, strict=True):
-            P = m.T_robot_from_projector(a)
-            out.append(ROTATION_WEIGHT_M * _log_rotation(P[:3, :3].T @ T[:3, :3]))
-            out.append(P[:3, 3] - T[:3, 3])
-        return np.concatenate(out)
+        P = np.array([m.T_robot_from_projector(a) for a in angles])
+        T = np.asarray(poses, dtype=np.float64)
+        rotation = ROTATION_WEIGHT_M * rotation_vectors(np.transpose(P[:, :3, :3], (0, 2, 1)) @ T[:, :3, :3])
+        return np.column_stack([rotation, P[:, :3, 3] - T[:, :3, 3]]).ravel()  # per pose: rotation, position
 
     sol = least_squares(residuals, np.zeros(18), method="lm", xtol=FIT_TOLERANCE, ftol=FIT_TOLERANCE,
                         gtol=FIT_TOLERANCE, max_nfev=5000)

@@ -35,6 +35,8 @@ from calibration.stereo import calibrate_camera, view_tilt_deg
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, make_pose, pose_from_rvec_tvec
+from geometry.robust import fit_plane
+from geometry.triangulation import triangulate
 
 # --- tolerances, in one place ------------------------------------------------------------------------------
 GRAY_MIN_CONTRAST = 4.0  # grey levels between a pattern and its inverse for a bit to count as decoded
@@ -286,9 +288,7 @@ def _basis_from_normal(n: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def plane_frame(points: NDArray[np.float64]) -> NDArray[np.float64]:
     """T_frame_from_plane for points (n, 3) near a plane: origin at their centroid, z along the normal."""
-    c = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - c)
-    n = vt[2]
+    c, n = fit_plane(points)
     if n[2] > 0:
         n = -n  # normal towards the device that looks at it (its z is forward)
     return make_pose(_basis_from_normal(n), c)
@@ -336,17 +336,6 @@ def calibrate_inverse_camera(points_3d: list[NDArray[np.float64]], projector_pix
 
 
 # --- stereo path ---------------------------------------------------------------------------------------------
-
-def triangulate(left: Intrinsics, right: Intrinsics, T_right_from_left: NDArray[np.float64],
-                left_pixels: NDArray[np.float64], right_pixels: NDArray[np.float64]) -> NDArray[np.float64]:
-    """3-D points (n, 3) in the left camera frame from distorted pixel pairs (midpoint-free linear DLT)."""
-    rl = left.rays(left_pixels)[:, :2]
-    rr = right.rays(right_pixels)[:, :2]
-    P1 = np.hstack([np.eye(3), np.zeros((3, 1))])
-    P2 = T_right_from_left[:3, :]
-    X = cv2.triangulatePoints(P1, P2, rl.T.astype(np.float64), rr.T.astype(np.float64))
-    return (X[:3] / X[3]).T
-
 
 def projector_grid(projector_size: tuple[int, int], step_px: int) -> NDArray[np.float64]:
     """Projector pixels (m, 2) on a regular grid with margin, row by row."""

@@ -18,9 +18,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from calibration.boards import Board, BoardView, detect
-from calibration.projector import triangulate
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, transform_points
+from geometry.robust import fit_plane
+from geometry.triangulation import triangulate
 
 PROJECTED_MARKER_FRACTION = 0.7  # ArUco marker size in a projected ChArUco square
 PLANE_SNAP_MAX_M = 0.003  # triangulated points are snapped to their fitted plane when it fits this well
@@ -82,13 +83,6 @@ def order_like(view: BoardView, expected_px: NDArray[np.float64]) -> BoardView:
     if b < a:
         return replace(view, image_points=view.image_points[::-1].copy())
     return view
-
-
-def fit_plane(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(centroid (3,), unit normal (3,)) of points (n, 3) by least squares."""
-    c = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - c)
-    return c, vt[2]
 
 
 def cast_onto_plane(projector: Intrinsics, T_ref_from_projector: NDArray[np.float64], pixels: NDArray[np.float64],

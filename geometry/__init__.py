@@ -1,4 +1,6 @@
-"""Shared geometry conventions: named frames, 4x4 poses, intrinsics, rig files, the pan/tilt head model.
+"""Shared geometry conventions: named frames, 4x4 poses and rotations, intrinsics and lens distortion, rig files,
+the pan/tilt head model; and the geometry several layers use, once: stereo triangulation (triangulation.py),
+polylines (polyline.py), line and plane fits with RANSAC's shared loop (robust.py).
 
 Every other package (scanner, mapping, calibration, arproj) builds on these; this package imports none of them.
 """

@@ -17,14 +17,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import InputError
-from geometry.poses import make_pose, rotation_about
+from geometry.poses import make_pose, rotation_matrices
 
 JOINT_NAMES = ("pan", "tilt", "roll")
-
-
-def _about_line(axis: NDArray[np.float64], point: NDArray[np.float64], angle_rad: float) -> NDArray[np.float64]:
-    R = rotation_about(axis, angle_rad)
-    return make_pose(R, point - R @ point)
 
 
 @dataclass
@@ -50,8 +45,8 @@ class HeadModel:
         """Projector pose for the (pan, tilt, roll) joint angles in degrees."""
         a = np.radians(np.asarray(angles_deg, dtype=np.float64).reshape(3) + self.zero_offsets_deg)
         T = np.eye(4)
-        for i in range(3):
-            T = T @ _about_line(self.axes[i], self.points[i], a[i])
+        for R, p in zip(rotation_matrices(self.axes * a[:, None]), self.points, strict=True):  # about each line
+            T = T @ make_pose(R, p - R @ p)
         return T @ self.T_robot_from_projector_zero
 
     def to_dict(self) -> dict:

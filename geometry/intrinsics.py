@@ -1,7 +1,8 @@
 """Pinhole intrinsics with OpenCV distortion, for cameras and projectors alike, and ROS camera_info YAML.
 
 The principal point may lie anywhere, even outside the image: a projector with lens shift has cy near or
-beyond the bottom edge. Distortion follows OpenCV's order (k1, k2, p1, p2, k3[, k4, k5, k6]).
+beyond the bottom edge. Distortion is OpenCV's model in its order (k1, k2, p1, p2, k3[, k4, k5, k6[, ...]]);
+geometry.distortion has it in numpy for vectorised fits.
 """
 
 from __future__ import annotations
@@ -102,6 +103,11 @@ class Intrinsics:
             xy = cv2.undistortPoints(uv, self.K, None)
         xy = xy.reshape(-1, 2)
         return np.column_stack([xy, np.ones(len(xy))])
+
+    def undistorted_pixels(self, pixels: ArrayLike) -> NDArray[np.float64]:
+        """Where pixels (n, 2) lie in the ideal pinhole image with the same K: lens distortion removed."""
+        rays = self.rays(pixels)
+        return np.column_stack([self.fx * rays[:, 0] + self.cx, self.fy * rays[:, 1] + self.cy])
 
 
 _DISTORTION_MODEL = {4: "plumb_bob", 5: "plumb_bob", 8: "rational_polynomial"}

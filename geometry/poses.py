@@ -1,11 +1,13 @@
-"""4x4 homogeneous poses named T_dst_from_src, and the one place OpenCV's rvec/tvec are converted.
+"""4x4 homogeneous poses named T_dst_from_src, rotations, and the one place OpenCV's rvec/tvec are converted.
 
 Points are (n, 3) float64 arrays in metres; p_dst = T_dst_from_src @ p_src, so chains read right to left.
+Rotation vectors (axis times angle in radians, OpenCV's rvec) go to and from matrices through scipy's Rotation,
+for one vector or a batch alike.
 """
 
-import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
 
 Pose = NDArray[np.float64]
 
@@ -37,25 +39,47 @@ def transform_points(T: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
     return p @ T[:3, :3].T + T[:3, 3]
 
 
+def rotation_matrices(rvecs: ArrayLike) -> NDArray[np.float64]:
+    """Rotation matrices (n, 3, 3) from rotation vectors (n, 3) (radians; zero gives the identity)."""
+    return Rotation.from_rotvec(np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)).as_matrix()
+
+
+def rotation_matrix(rvec: ArrayLike) -> NDArray[np.float64]:
+    """The 3x3 rotation of one rotation vector (3,), as cv2.Rodrigues gives it."""
+    return rotation_matrices(rvec)[0]
+
+
+def rotation_vectors(Rs: ArrayLike) -> NDArray[np.float64]:
+    """Rotation vectors (n, 3) of rotations (n, 3, 3) (the log map; angles in [0, π])."""
+    return Rotation.from_matrix(np.asarray(Rs, dtype=np.float64).reshape(-1, 3, 3)).as_rotvec()
+
+
+def rotation_vector(R: ArrayLike) -> NDArray[np.float64]:
+    """The rotation vector (3,) of a 3x3 rotation (or a pose's rotation part)."""
+    return rotation_vectors(np.asarray(R, dtype=np.float64)[:3, :3])[0]
+
+
 def rotation_about(axis: ArrayLike, angle_rad: float) -> NDArray[np.float64]:
     """3x3 rotation by angle_rad about a (not necessarily unit) axis, right-handed."""
     a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    R, _ = cv2.Rodrigues(a * float(angle_rad))
-    return np.asarray(R, dtype=np.float64)
+    return rotation_matrix(a / np.linalg.norm(a) * float(angle_rad))
 
 
 def pose_from_rvec_tvec(rvec: ArrayLike, tvec: ArrayLike) -> Pose:
     """OpenCV's (rvec, tvec) as a pose. For solvePnP/calibrateCamera they are T_camera_from_board."""
-    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3))
-    return make_pose(R, np.asarray(tvec, dtype=np.float64).reshape(3))
+    return make_pose(rotation_matrix(rvec), np.asarray(tvec, dtype=np.float64).reshape(3))
+
+
+def pose_from_vector(x: ArrayLike) -> Pose:
+    """The pose of a 6-vector (rotation vector, translation), the parametrisation the least-squares fits use."""
+    x = np.asarray(x, dtype=np.float64).reshape(6)
+    return pose_from_rvec_tvec(x[:3], x[3:])
 
 
 def rvec_tvec_from_pose(T: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The inverse of pose_from_rvec_tvec: (rvec (3,), tvec (3,))."""
     T = np.asarray(T, dtype=np.float64)
-    rvec, _ = cv2.Rodrigues(T[:3, :3])
-    return np.asarray(rvec, dtype=np.float64).reshape(3), T[:3, 3].copy()
+    return rotation_vector(T[:3, :3]), T[:3, 3].copy()
 
 
 def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> Pose:

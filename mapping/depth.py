@@ -63,10 +63,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from geometry.polyline import distances_to_polyline
+from geometry.robust import fit_line
 from mapping import tolerances as tol
 from mapping.fusion import InductiveModel
 from mapping.grid import WallGrid
-from mapping.objects import MapObject, distances_to_polyline
+from mapping.objects import MapObject
 from scanner.sensor_model import COUNTS_FULL_SCALE
 
 MIN_CROSSING_SIN = 0.3  # a pass at < 17° to a line sees a peak > 3.3x wider and is used as a strip instead
@@ -638,8 +640,8 @@ def _refined_direction(centres: list[NDArray[np.float64]], e: NDArray[np.float64
     c = np.asarray(centres)
     if c.shape[0] < MIN_MEASUREMENTS or np.ptp(c @ e) < DIRECTION_MIN_SPAN_M:
         return e
-    _, _, vt = np.linalg.svd(c - c.mean(axis=0), full_matrices=False)
-    d = vt[0] if float(vt[0] @ e) >= 0 else -vt[0]
+    _, u = fit_line(c)
+    d = u if float(u @ e) >= 0 else -u
     return d if float(d @ e) >= math.cos(math.radians(DIRECTION_MAX_CHANGE_DEG)) else e
 
 

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from geometry.polyline import distances_to_polyline
 from mapping.evidence import CHANNEL_SEES, SAFETY_CHANNELS, Coverage
 from mapping.mapfile import CLASS_LABELS, MappedObject
-from mapping.objects import distances_to_polyline
 from scanner.sensor_model import points_in_polygon
 
 SAFE, KEEP_AWAY, UNKNOWN = "safe", "keep_away", "unknown"

@@ -18,10 +18,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from geometry.polyline import densify, distances_to_polyline, polyline_length
 from mapping.evidence import Coverage
 from mapping.mapfile import MappedObject
 from mapping.objects import MapObject
-from scanner.wall import Wall, WallObject, densify, distance_to_polyline
+from scanner.wall import Wall, WallObject
 
 MATCH_M = 0.015
 MIN_COVERAGE = 0.7
@@ -107,8 +108,8 @@ def evaluate(objects: list[MapObject], wall: Wall, match_m: float = MATCH_M,
     real = [o for o in wall.objects if o.kind in ("pipe", "cable")]
     for o in lines:
         pts = densify(o.points_m, 0.002)
-        seg_len = np.linalg.norm(np.diff(o.points_m, axis=0), axis=1).sum() / max(len(pts) - 1, 1)
-        d = np.min([distance_to_polyline(pts, r.points_m) for r in real], axis=0) if real else \
+        seg_len = polyline_length(o.points_m) / max(len(pts) - 1, 1)
+        d = np.min([distances_to_polyline(pts, r.points_m) for r in real], axis=0) if real else \
             np.full(len(pts), np.inf)
         ev.detected_length_m += seg_len * len(pts)
         ev.true_length_m += seg_len * float((d < match_m).sum())
@@ -124,7 +125,7 @@ def evaluate(objects: list[MapObject], wall: Wall, match_m: float = MATCH_M,
             best = None
             for r in real:
                 for ra, rb in zip(r.points_m[:-1], r.points_m[1:], strict=True):
-                    dd = float(distance_to_polyline(probe, np.array([ra, rb])).mean())
+                    dd = float(distances_to_polyline(probe, np.array([ra, rb])).mean())
                     if dd < match_m and (best is None or dd < best[0]):
                         best = (dd, rb - ra)
             if best is not None:
@@ -150,7 +151,7 @@ def _match_targets(lines: list[tuple[NDArray[np.float64], str]], wall: Wall, mat
         if not lines:
             ev.missed.append(t.id)
             continue
-        dists = np.stack([distance_to_polyline(probe, points) for points, _ in lines])
+        dists = np.stack([distances_to_polyline(probe, points) for points, _ in lines])
         covered = dists.min(axis=0) < match_m
         if covered.mean() >= min_coverage:
             ev.n_found += 1
@@ -232,7 +233,7 @@ def false_safe(objects: list[MappedObject], coverage: Coverage, wall: Wall, step
         probes = densify(np.asarray(obj.geometry_m, dtype=np.float64), step_m)
         verdicts = [v.verdict for v in check_points(probes, objects, coverage, bounds)]
         n = max(len(verdicts), 1)
-        length = float(np.linalg.norm(np.diff(obj.geometry_m, axis=0), axis=1).sum()) or step_m
+        length = polyline_length(obj.geometry_m) or step_m
         out.probed_m[obj.id] = length
         out.safe_m[obj.id] = length * sum(v == SAFE for v in verdicts) / n
         out.unknown_m[obj.id] = length * sum(v == UNKNOWN for v in verdicts) / n
@@ -256,7 +257,6 @@ def area_recall(objects: list[MapObject], wall: Wall) -> tuple[int, int, list[st
     """(found, total, missed ids) of the wall's studs, beams, plates (socket boxes) and cavities: found when a
     mapped object of a class the channels can give it (a wood stud: non-metal; a steel stud or plate: metal)
     comes within AREA_MATCH_M of the area's middle or covers it."""
-    from mapping.objects import distances_to_polyline
     from scanner.sensor_model import points_in_polygon
 
     found, missed, total = 0, [], 0
@@ -309,7 +309,7 @@ def pipes_labelled_wood(objects: list[MapObject], wall: Wall, match_m: float = M
             if o.kind == "outline" and len(pts) >= 3:
                 under = points_in_polygon(probe, pts)
             elif o.kind == "line":
-                under = distance_to_polyline(probe, pts) < match_m
+                under = distances_to_polyline(probe, pts) < match_m
             else:
                 continue  # a fastener names a point, not a course
             if o.cls == "non_metal" and (o.kind == "outline" or metal):
@@ -325,8 +325,6 @@ def pipes_labelled_wood(objects: list[MapObject], wall: Wall, match_m: float = M
 
 def truth_under(obj: MapObject, wall: Wall, match_m: float = MATCH_M) -> WallObject | None:
     """The true pipe, cable or screw a mapped line or point lies on (mean distance within match_m), or None."""
-    from mapping.objects import distances_to_polyline
-
     best: tuple[float, WallObject] | None = None
     for t in wall.objects:
         if obj.kind == "point" and t.kind in ("screw", "nail"):

@@ -179,7 +179,7 @@ def _footprint_sigma(channel: str, cls: str, depth_m: float) -> float:
 
 def _distance_field(obj: MapObject, xs: NDArray[np.float64], ys: NDArray[np.float64]) -> NDArray[np.float64]:
     """Distances (len(ys), len(xs)) from cell centres to the object's centre line, point or outline (0 inside)."""
-    from mapping.objects import distances_to_polyline
+    from geometry.polyline import distances_to_polyline
     from scanner.sensor_model import points_in_polygon
 
     gx, gy = np.meshgrid(xs, ys)

@@ -15,8 +15,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from geometry.polyline import distances_to_polyline
 from mapping.grid import GridInfo, SensorModel, WallGrid
-from mapping.objects import MapObject, _distance_to_polyline, extract_lines, extract_points
+from mapping.objects import MapObject, extract_lines, extract_points
 from mapping.stitching import FrameGraph, apply_pose
 from scanner.sensor_model import additive_units
 
@@ -40,7 +41,7 @@ def frame_features(uv: NDArray[np.float64], inductive: NDArray[np.float64],
     sig = grid.signal("inductive")
     lines = extract_lines(sig, info)
     points = [p for p in extract_points(additive_units("inductive", sig), info, min_strength=8.0)
-              if all(_distance_to_polyline(p.points_m[0], ln.points_m) > 0.02 for ln in lines)]
+              if all(distances_to_polyline(p.points_m[0], ln.points_m)[0] > 0.02 for ln in lines)]
     return points, lines
 
 

@@ -27,7 +27,6 @@ non-metal without an inductive channel, and nothing metal without one.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,8 +34,9 @@ from numpy.typing import NDArray
 from scipy import ndimage
 from scipy.special import expit
 
+from geometry.polyline import midpoint_samples
 from mapping.grid import GridInfo, WallGrid
-from mapping.objects import LINE_SIGMA_M, MapObject, _smooth_derivatives, normalise, ridge_width
+from mapping.objects import LINE_SIGMA_M, MapObject, normalise, ridge_width, smooth_derivatives
 from scanner.sensor_model import additive_units, points_in_polygon
 
 CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "non_metal", "cavity", "fastener")
@@ -110,7 +110,7 @@ class InductiveModel:
         return float(self.pipe_strength * g**3 * factor)
 
 
-def _raw(display: NDArray[np.float64] | float) -> NDArray[np.float64]:
+def raw_from_display(display: NDArray[np.float64] | float) -> NDArray[np.float64]:
     """Display units 1 − exp(−raw) back to raw units (saturation undone)."""
     return -np.log(np.clip(1.0 - np.asarray(display, dtype=np.float64), 1e-6, 1.0))
 
@@ -122,23 +122,6 @@ def _sigmoid(x: NDArray[np.float64] | float) -> NDArray[np.float64] | float:
 def _sample(z: NDArray[np.float64], info: GridInfo, xy: NDArray[np.float64]) -> NDArray[np.float64]:
     pix = info.to_pixel(xy)
     return ndimage.map_coordinates(z, [pix[:, 1], pix[:, 0]], order=1, mode="nearest")
-
-
-def _densify(poly: NDArray[np.float64], step: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Points along a polyline and the unit normal at each, (k, 2) each."""
-    pts, normals = [], []
-    for a, b in itertools.pairwise(poly):
-        d = b - a
-        length = float(np.linalg.norm(d))
-        if length < 1e-9:
-            continue
-        n = max(1, int(np.ceil(length / step)))
-        t = (np.arange(n) + 0.5) / n
-        pts.append(a + t[:, None] * d)
-        normals.append(np.repeat([[-d[1] / length, d[0] / length]], n, axis=0))
-    if not pts:
-        return poly[:1], np.array([[1.0, 0.0]])
-    return np.vstack(pts), np.vstack(normals)
 
 
 class Fuser:
@@ -167,7 +150,7 @@ class Fuser:
             for s, z in self.z.items():
                 f[f"{s}_z"] = self._median_inside(s, z, obj.points_m)
             return f
-        pts, normals = _densify(obj.points_m, 0.005) if obj.kind == "line" else (obj.points_m, None)
+        pts, normals = midpoint_samples(obj.points_m, 0.005) if obj.kind == "line" else (obj.points_m, None)
         for s, z in self.z.items():
             f[f"{s}_z"] = float(np.median(_sample(z, info, pts)))
         if "ac" in self.z and normals is not None:
@@ -178,7 +161,7 @@ class Fuser:
         if "inductive" in self.signal and obj.kind == "line":
             sig = np.nan_to_num(self.signal["inductive"], nan=self.background["inductive"])
             peak = float(np.median(_sample(sig, info, pts)))
-            amp = float(_raw(peak) - _raw(self.background["inductive"]))
+            amp = float(raw_from_display(peak) - raw_from_display(self.background["inductive"]))
             seg = np.diff(obj.points_m, axis=0)
             main = seg[int(np.argmax(np.linalg.norm(seg, axis=1)))]
             # the width in units where the footprint adds up: a shallow pipe's saturated display top widens
@@ -198,7 +181,7 @@ class Fuser:
             raw = additive_units("inductive", self.signal["inductive"])
             z, _, _ = normalise(raw)
             sigma_px = LINE_SIGMA_M / self.grid.info.resolution
-            s, _gx, _gy, hxx, hxy, hyy, _w = _smooth_derivatives(z, np.isfinite(raw), sigma_px)
+            s, _gx, _gy, hxx, hxy, hyy, _w = smooth_derivatives(z, np.isfinite(raw), sigma_px)
             self._ridge = (s, hxx, hxy, hyy, sigma_px)
         s, hxx, hxy, hyy, sigma_px = self._ridge
         info = self.grid.info

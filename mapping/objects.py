@@ -21,6 +21,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
+from geometry.polyline import distances_to_polyline, polyline_length
+from geometry.robust import fit_line
 from mapping import tolerances as tol
 from mapping.grid import GridInfo
 
@@ -43,8 +45,7 @@ class MapObject:
     depth_sigma_m: float | None = None
 
     def length_m(self) -> float:
-        p = self.points_m
-        return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) if len(p) > 1 else 0.0
+        return polyline_length(self.points_m)
 
     def to_json(self) -> dict:
         return {"class": self.cls, "kind": self.kind,
@@ -115,8 +116,8 @@ def normalise(signal: NDArray[np.float64], two_sided: bool = False) -> tuple[NDA
     return z, level, sigma
 
 
-def _smooth_derivatives(z: NDArray[np.float64], known: NDArray[np.bool_], sigma_px: float
-                        ) -> tuple[NDArray[np.float64], ...]:
+def smooth_derivatives(z: NDArray[np.float64], known: NDArray[np.bool_], sigma_px: float
+                       ) -> tuple[NDArray[np.float64], ...]:
     """Normalised-convolution Gaussian derivatives: unknown cells do not drag edges down."""
     w = ndimage.gaussian_filter(known.astype(np.float64), sigma_px)
     wsafe = np.maximum(w, 1e-6)
@@ -157,7 +158,7 @@ def ridge_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = L
     z = polarity * z
     known = np.isfinite(signal)
     sigma_px = sigma_m / info.resolution
-    s, gx, gy, hxx, hxy, hyy, w = _smooth_derivatives(z, known, sigma_px)
+    s, gx, gy, hxx, hxy, hyy, w = smooth_derivatives(z, known, sigma_px)
     # Most negative eigenvalue of the Hessian and its eigenvector (the direction across the ridge)
     tr_half = 0.5 * (hxx + hyy)
     disc = np.sqrt(np.maximum(0.25 * (hxx - hyy) ** 2 + hxy**2, 0.0))
@@ -278,13 +279,6 @@ def _douglas_peucker(p: NDArray[np.float64], eps: float) -> list[int]:
     return sorted(set(keep))
 
 
-def _fit_line(p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(centroid (2,), unit direction (2,)) of the total-least-squares line through p (m, 2)."""
-    c = p.mean(axis=0)
-    _, _, vt = np.linalg.svd(p - c, full_matrices=False)
-    return c, vt[0]
-
-
 def _intersect(c1: NDArray[np.float64], d1: NDArray[np.float64], c2: NDArray[np.float64],
                d2: NDArray[np.float64]) -> NDArray[np.float64] | None:
     A = np.column_stack([d1, -d2])
@@ -329,7 +323,7 @@ def _polyline_from_chain(xy: NDArray[np.float64]) -> list[NDArray[np.float64]]:
             run = piece[a:b + 1]
             # Short runs are the hooks a ridge detector draws where a line ends or crosses another
             if run.shape[0] >= 4 and np.linalg.norm(run[-1] - run[0]) >= tol.MIN_RUN_M:
-                lines.append((_fit_line(run), run))
+                lines.append((fit_line(run), run))
         if not lines:
             continue
         lines = _drop_corner_cuts(lines)
@@ -348,8 +342,8 @@ def _polyline_from_chain(xy: NDArray[np.float64]) -> list[NDArray[np.float64]]:
     return out
 
 
-def _join(polys: list[NDArray[np.float64]], widths: list[float],
-          strengths: list[float]) -> tuple[list[NDArray[np.float64]], list[float], list[float]]:
+def join_polylines(polys: list[NDArray[np.float64]], widths: list[float],
+                   strengths: list[float]) -> tuple[list[NDArray[np.float64]], list[float], list[float]]:
     """Join polylines whose ends meet: first collinear ends (a ridge interrupted where another crosses it),
     then angled ends into bends, except at a crossing (where another polyline passes the joint)."""
     polys = [p.copy() for p in polys]
@@ -363,7 +357,7 @@ def _join(polys: list[NDArray[np.float64]], widths: list[float],
                     joined = _try_join(polys[a], polys[b], allow_bend, others)
                     if joined is None:
                         continue
-                    la, lb = _length(polys[a]), _length(polys[b])
+                    la, lb = polyline_length(polys[a]), polyline_length(polys[b])
                     polys[a] = joined
                     widths[a] = (widths[a] * la + widths[b] * lb) / max(la + lb, 1e-12)
                     strengths[a] = (strengths[a] * la + strengths[b] * lb) / max(la + lb, 1e-12)
@@ -378,22 +372,6 @@ def _join(polys: list[NDArray[np.float64]], widths: list[float],
 def _distance_to_polyline(x: NDArray[np.float64], poly: NDArray[np.float64]) -> float:
     """Distance (metres) of one point (2,) to a polyline (k, 2)."""
     return float(distances_to_polyline(np.asarray(x, dtype=np.float64).reshape(1, 2), poly)[0])
-
-
-def distances_to_polyline(x: NDArray[np.float64], poly: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Distances (n,) of points (n, 2) to a polyline (k, 2), metres."""
-    if poly.shape[0] == 1:
-        return np.linalg.norm(x - poly[0], axis=1)
-    a, b = poly[:-1], poly[1:]
-    d = b - a
-    t = np.einsum("nkj,kj->nk", x[:, None, :] - a[None], d) / np.maximum(np.einsum("kj,kj->k", d, d), 1e-18)
-    t = np.clip(t, 0.0, 1.0)
-    foot = a[None] + t[..., None] * d[None]
-    return np.min(np.linalg.norm(foot - x[:, None, :], axis=2), axis=1)
-
-
-def _length(p: NDArray[np.float64]) -> float:
-    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
 
 
 def _try_join(p: NDArray[np.float64], q: NDArray[np.float64], allow_bend: bool,
@@ -472,7 +450,7 @@ def extract_lines(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 
             polys.append(poly)
             widths.append(float(np.median(r.width[idx])))
             strengths.append(float(np.median(r.strength[idx])))
-    polys, widths, strengths = _join(polys, widths, strengths)
+    polys, widths, strengths = join_polylines(polys, widths, strengths)
     polys = [p[_douglas_peucker(p, tol.LINE_INLIER_M)] for p in polys]  # drop vertices left by merges
     return [MapObject("line", p, w, s) for p, w, s in zip(polys, widths, strengths, strict=True)]
 
@@ -503,7 +481,7 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
     z, _, _ = normalise(signal)
     known = np.isfinite(signal)
     sigma_px = sigma_m / info.resolution
-    s, gx, gy, hxx, hxy, hyy, w = _smooth_derivatives(z, known, sigma_px)
+    s, gx, gy, hxx, hxy, hyy, w = smooth_derivatives(z, known, sigma_px)
     peak = (s == ndimage.maximum_filter(s, size=5)) & (s >= min_strength) & (w > 0.5)
     rows, cols = np.nonzero(peak)
     if rows.size == 0:
@@ -578,7 +556,7 @@ def extract_regions(signal: NDArray[np.float64], info: GridInfo, polarity: float
 
     z, _, _ = normalise(signal, two_sided)
     known = np.isfinite(signal)
-    s, *_rest, w = _smooth_derivatives(polarity * z, known, sigma_m / info.resolution)
+    s, *_rest, w = smooth_derivatives(polarity * z, known, sigma_m / info.resolution)
     mask = (s >= min_strength) & (w > 0.5)
     if exclude is not None:
         mask &= ~exclude

@@ -401,7 +401,7 @@ def _non_metal_lines(grid: WallGrid, fuser: Fuser, metal_lines: list[MapObject],
 def _is_stud(line: MapObject, fasteners: NDArray[np.float64]) -> bool:
     """A straight non-metal ridge with STUD_FASTENERS or more fasteners on its centre line (within a quarter
     of its width): the boards' screws or nails, driven into a stud."""
-    from mapping.objects import distances_to_polyline
+    from geometry.polyline import distances_to_polyline
 
     p = line.points_m
     chord = p[-1] - p[0]
@@ -456,15 +456,14 @@ def _without_duplicate_parts(obj: MapObject, kept: list[MapObject], radius_m: fl
     """obj minus the segments that lie along lines already kept (a cable seen by both the AC and the
     inductive sensor); what remains, split where segments were removed. A segment is a duplicate when 70 %
     of it lies within radius_m of a kept line."""
-    from mapping.fusion import _densify
-    from mapping.objects import distances_to_polyline
+    from geometry.polyline import distances_to_polyline, midpoint_samples
 
     if not kept:
         return [obj]
     p = obj.points_m
     dup = []
     for a, b in itertools.pairwise(p):
-        pts, _ = _densify(np.array([a, b]), 0.01)
+        pts, _ = midpoint_samples(np.array([a, b]), 0.01)
         d = np.min([distances_to_polyline(pts, k.points_m) for k in kept], axis=0)
         dup.append(bool((d < radius_m).mean() > 0.7))
     if not any(dup):

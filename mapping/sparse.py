@@ -12,13 +12,17 @@ against the height a pipe would give at the depth its width implies separates ca
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import expit
 
+from geometry.polyline import distances_to_polyline
+from geometry.robust import best_hypothesis, draw_samples, fit_line, refine
 from mapping import tolerances as tol
-from mapping.fusion import FusionParams, InductiveModel, _raw, _sigmoid
-from mapping.objects import MapObject, _join, distances_to_polyline
+from mapping.fusion import FusionParams, InductiveModel, raw_from_display
+from mapping.objects import MapObject, join_polylines
 from scanner.peaks import PeakConfig, detect_peaks, level_crossings
 from scanner.sensor_model import additive_units
 
@@ -180,10 +184,11 @@ def _crosses(axis: NDArray, u: NDArray[np.float64]) -> NDArray[np.bool_]:
     return np.abs(across) >= MIN_CROSSING_SIN
 
 
-def _fit(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    c = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - c, full_matrices=False)
-    return c, vt[0]
+def _refit_run(p: NDArray[np.float64], axis: NDArray, inl: NDArray[np.bool_]) -> tuple[None, NDArray[np.bool_]]:
+    """Least squares through a run's peaks p[inl], then the peaks near that line whose pass crosses it."""
+    c, u = fit_line(p[inl])
+    nrm = np.array([-u[1], u[0]])
+    return None, (np.abs((p - c) @ nrm) < RANSAC_INLIER_M) & _crosses(axis, u)
 
 
 def ransac_lines(peaks: PassPeaks, seed: int = 0) -> list[tuple[NDArray[np.float64], NDArray[np.int64]]]:
@@ -193,8 +198,7 @@ def ransac_lines(peaks: PassPeaks, seed: int = 0) -> list[tuple[NDArray[np.float
     runs = []
     while remaining.size >= MIN_PEAKS_PER_LINE:
         p = peaks.xy[remaining]
-        a = rng.integers(0, p.shape[0], RANSAC_PAIRS)
-        b = rng.integers(0, p.shape[0], RANSAC_PAIRS)
+        a, b = draw_samples(rng, p.shape[0], 2, RANSAC_PAIRS, by_column=True).T
         d = p[b] - p[a]
         length = np.linalg.norm(d, axis=1)
         good = (length > 0.01) & (length < 1.0) & (peaks.pass_id[remaining][a] != peaks.pass_id[remaining][b])
@@ -206,18 +210,13 @@ def ransac_lines(peaks: PassPeaks, seed: int = 0) -> list[tuple[NDArray[np.float
         axis = peaks.axis[remaining]
         crossing = _crosses(axis, d / length[:, None])  # (hypotheses, points)
         counts = ((dist < RANSAC_INLIER_M) & crossing).sum(axis=1)
-        best = int(np.argmax(counts))
+        best = best_hypothesis(len(counts), counts.__getitem__)
         if counts[best] < MIN_PEAKS_PER_LINE:
             break
         inl = (dist[best] < RANSAC_INLIER_M) & crossing[best]
-        for _ in range(2):  # least squares on the inliers, then re-collect them
-            c, u = _fit(p[inl])
-            nrm = np.array([-u[1], u[0]])
-            inl = (np.abs((p - c) @ nrm) < RANSAC_INLIER_M) & _crosses(axis, u)
-            if inl.sum() < 2:
-                break
+        _, inl = refine(inl, partial(_refit_run, p, axis), rounds=2, min_inliers=2)
         idx = remaining[inl]
-        c, u = _fit(peaks.xy[idx]) if idx.size >= 2 else (peaks.xy[idx[0]], np.array([1.0, 0.0]))
+        c, u = fit_line(peaks.xy[idx]) if idx.size >= 2 else (peaks.xy[idx[0]], np.array([1.0, 0.0]))
         t = (peaks.xy[idx] - c) @ u
         srt = np.argsort(t)
         t, idx_sorted = t[srt], idx[srt]
@@ -225,7 +224,7 @@ def ransac_lines(peaks: PassPeaks, seed: int = 0) -> list[tuple[NDArray[np.float
         for tt, ii in zip(np.split(t, cuts), np.split(idx_sorted, cuts), strict=True):
             if ii.size >= MIN_PEAKS_PER_LINE and len(set(peaks.pass_id[ii].tolist())) >= 2 and \
                     tt[-1] - tt[0] >= tol.LINE_MIN_LENGTH_M:
-                cc, uu = _fit(peaks.xy[ii])
+                cc, uu = fit_line(peaks.xy[ii])
                 ts = (peaks.xy[ii] - cc) @ uu
                 runs.append((np.array([cc + ts.min() * uu, cc + ts.max() * uu]), ii))
         remaining = remaining[~inl]
@@ -387,14 +386,14 @@ def _build(peaks: PassPeaks, channel: str, model: InductiveModel, params: Fusion
         sin = np.abs(pass_dir[:, 0] * u[1] - pass_dir[:, 1] * u[0])
         widths.append(float(np.median(peaks.width[ii] * sin)))
         strengths.append(float(np.median(peaks.height[ii])))
-    joined, widths, strengths = _join(polys, widths, strengths)
+    joined, widths, strengths = join_polylines(polys, widths, strengths)
     out = []
     for poly, width, height in zip(joined, widths, strengths, strict=True):
         obj = MapObject("line", poly, width, height)
         obj.features = {"length_m": obj.length_m(), "width_m": width, f"{channel}_peak": height,
                         "source": 1.0 if channel == "ac" else 0.0}
         if channel == "ac":
-            obj.cls, obj.confidence = "power_line", float(_sigmoid((height - 0.05) / 0.01))
+            obj.cls, obj.confidence = "power_line", float(expit((height - 0.05) / 0.01))
         else:
             _classify_inductive(obj, peaks.baseline, model, params)
         out.append(obj)
@@ -405,12 +404,12 @@ def _classify_inductive(obj: MapObject, baseline: float, model: InductiveModel, 
     seg = np.diff(obj.points_m, axis=0)
     main = seg[int(np.argmax(np.linalg.norm(seg, axis=1)))]
     depth = model.depth_from_width(obj.width_m, main)
-    amp = float(_raw(baseline + obj.strength) - _raw(baseline))
+    amp = float(raw_from_display(baseline + obj.strength) - raw_from_display(baseline))
     ratio = amp / model.pipe_peak_raw(depth, main)
     obj.features.update({"inductive_raw": amp, "depth_est_m": depth, "strength_ratio": ratio})
     log_ratio = float(np.log(max(ratio, 1e-6)))
-    cable = float(_sigmoid((np.log(params.cable_max_ratio) - log_ratio) / 0.3))
-    sheet = float(_sigmoid((log_ratio - np.log(params.area_min_ratio)) / 0.3))
+    cable = float(expit((np.log(params.cable_max_ratio) - log_ratio) / 0.3))
+    sheet = float(expit((log_ratio - np.log(params.area_min_ratio)) / 0.3))
     scores = {"power_line": cable, "metal_pipe": (1 - cable) * (1 - sheet), "metal": (1 - cable) * sheet}
     obj.cls = max(scores, key=scores.get)  # type: ignore[arg-type]
     obj.confidence = float(scores[obj.cls] / max(sum(scores.values()), 1e-9))

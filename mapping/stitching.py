@@ -30,6 +30,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
+from geometry import robust
 from geometry.errors import InputError
 from mapping import tolerances as tol
 
@@ -65,12 +66,6 @@ class Plane:
         return sigma2 * np.linalg.inv(X.T @ X)
 
 
-def _lsq_plane(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    centroid = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - centroid, full_matrices=False)
-    return vt[-1], centroid
-
-
 def fit_plane(points: ArrayLike, inlier_m: float = tol.PLANE_INLIER_M, iterations: int = tol.RANSAC_ITERATIONS,
               seed: int = 0, toward: ArrayLike | None = None, what: str = "points") -> Plane:
     """The dominant plane of points (n, 3) metres: RANSAC, then least squares on the inliers (twice).
@@ -84,8 +79,7 @@ def fit_plane(points: ArrayLike, inlier_m: float = tol.PLANE_INLIER_M, iteration
     if q.shape[0] < tol.PLANE_MIN_POINTS:
         raise InputError(f"{what}: only {q.shape[0]} sound points, too few for a wall plane "
                          f"(need {tol.PLANE_MIN_POINTS})", "the frame keeps its localization pose")
-    rng = np.random.default_rng(seed)
-    trip = rng.integers(0, q.shape[0], size=(iterations, 3))
+    trip = robust.draw_samples(np.random.default_rng(seed), q.shape[0], 3, iterations)
     a, b, c = q[trip[:, 0]], q[trip[:, 1]], q[trip[:, 2]]
     normals = np.cross(b - a, c - a)
     norms = np.linalg.norm(normals, axis=1)
@@ -94,22 +88,21 @@ def fit_plane(points: ArrayLike, inlier_m: float = tol.PLANE_INLIER_M, iteration
         raise InputError(f"{what}: points are collinear; no plane can be fitted")
     normals = normals[good] / norms[good, None]
     ds = np.einsum("ij,ij->i", normals, a[good])
-    # Score hypotheses in chunks: counts of points within inlier_m
-    counts = np.zeros(normals.shape[0], np.int64)
-    for s in range(0, normals.shape[0], 50):
-        counts[s:s + 50] = (np.abs(q @ normals[s:s + 50].T - ds[s:s + 50]) < inlier_m).sum(axis=0)
-    best = int(np.argmax(counts))
+    # Scored in chunks of 50 hypotheses: counts of points within inlier_m
+    best = robust.best_hypothesis(len(normals),
+                                  lambda h: (np.abs(q @ normals[h].T - ds[h]) < inlier_m).sum(axis=0), chunk=50)
     inl = np.abs(q @ normals[best] - ds[best]) < inlier_m
     if inl.sum() < 3:
         raise InputError(f"{what}: no plane with at least 3 points within {inlier_m * 1000:.0f} mm")
-    for _ in range(2):
-        n, centroid = _lsq_plane(q[inl])
+
+    def refit(inl: NDArray[np.bool_]) -> tuple[None, NDArray[np.bool_]]:
+        centroid, n = robust.fit_plane(q[inl])
         resid = (q - centroid) @ n
         new_inl = np.abs(resid) < max(inlier_m, 3.0 * float(np.std(resid[inl])))
-        if new_inl.sum() < 3:
-            break
-        inl = new_inl
-    n, centroid = _lsq_plane(q[inl])
+        return None, new_inl if new_inl.sum() >= 3 else inl  # too few: keep the last inliers
+
+    _, inl = robust.refine(inl, refit, rounds=2)
+    centroid, n = robust.fit_plane(q[inl])
     sv = np.linalg.svd(q[inl] - centroid, compute_uv=False)
     if sv.size < 2 or sv[1] < 1e-6 * max(sv[0], 1e-12):
         raise InputError(f"{what}: inlier points are collinear; no plane can be fitted")

@@ -27,19 +27,22 @@ class DistortionMap:
     map_xy: NDArray[np.float32]
 
 
+def _pixel_grid(intr: Intrinsics) -> NDArray[np.float64]:
+    """Every pixel (u, v) of the image, (h·w, 2), row by row."""
+    u, v = np.meshgrid(np.arange(intr.width, dtype=np.float64), np.arange(intr.height, dtype=np.float64))
+    return np.column_stack([u.ravel(), v.ravel()])
+
+
 def undistorted_directions(intr: Intrinsics) -> NDArray[np.float64]:
     """Normalised image coordinates (h, w, 2) of the ray through every pixel of the distorted image."""
-    u, v = np.meshgrid(np.arange(intr.width, dtype=np.float64), np.arange(intr.height, dtype=np.float64))
-    rays = intr.rays(np.column_stack([u.ravel(), v.ravel()]))
-    return rays[:, :2].reshape(intr.height, intr.width, 2)
+    return intr.rays(_pixel_grid(intr))[:, :2].reshape(intr.height, intr.width, 2)
 
 
 @lru_cache(maxsize=16)
 def distortion_map(intr: Intrinsics) -> DistortionMap:
     """The lookup map for intr (cached: intrinsics are frozen and hashable)."""
-    xy = undistorted_directions(intr)
-    u = intr.fx * xy[..., 0] + intr.cx
-    v = intr.fy * xy[..., 1] + intr.cy
+    uv = intr.undistorted_pixels(_pixel_grid(intr)).reshape(intr.height, intr.width, 2)
+    u, v = uv[..., 0], uv[..., 1]
     u0 = min(0.0, float(np.floor(u.min())) - _MARGIN_PX)
     v0 = min(0.0, float(np.floor(v.min())) - _MARGIN_PX)
     u1 = max(intr.width - 1.0, float(np.ceil(u.max())) + _MARGIN_PX)

@@ -34,8 +34,9 @@ from typing import Any
 
 import numpy as np
 
+from geometry.polyline import densify, distances_to_polyline
 from scanner.sensor_model import points_in_polygon
-from scanner.wall import FORMAT, Wall, densify, distance_to_polyline, wall_from_dict
+from scanner.wall import FORMAT, Wall, wall_from_dict
 
 HARD_CASES: tuple[str, ...] = (
     "bends and elbows",
@@ -411,8 +412,8 @@ class _Shape:
         for inner, area in ((self, other), (other, self)):
             if area.polygon is not None and points_in_polygon(inner.samples, area.polygon).any():
                 return 0.0
-        return min(float(distance_to_polyline(self.samples, other.path).min()),
-                   float(distance_to_polyline(other.samples, self.path).min()))
+        return min(float(distances_to_polyline(self.samples, other.path).min()),
+                   float(distances_to_polyline(other.samples, self.path).min()))
 
 
 def _inside(group: _Group, size: _Size) -> bool:

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.errors import InputError
+from geometry.robust import best_hypothesis, draw_samples, refine
 
 LINE_INLIER_M = 0.02  # RANSAC inlier distance for wall lines (several range-noise σ; outliers lie far)
 LINE_MAX_TILT_RAD = math.radians(15.0)  # a wall line must run within this of its expected direction
@@ -100,7 +101,7 @@ def _ransac_line(p: NDArray[np.float64], direction: NDArray[np.float64], rng: np
     within LINE_MAX_TILT_RAD of `direction` (unit (2,))."""
     if len(p) < LINE_MIN_POINTS:
         return np.zeros(len(p), bool)
-    pairs = rng.integers(0, len(p), size=(RANSAC_ITERATIONS, 2))
+    pairs = draw_samples(rng, len(p), 2, RANSAC_ITERATIONS)
     a, b = p[pairs[:, 0]], p[pairs[:, 1]]
     v = b - a
     length = np.linalg.norm(v, axis=1)
@@ -113,8 +114,8 @@ def _ransac_line(p: NDArray[np.float64], direction: NDArray[np.float64], rng: np
         return np.zeros(len(p), bool)
     n = np.column_stack([-v[:, 1], v[:, 0]])
     dist = np.abs(np.einsum("kj,knj->kn", n, p[None, :, :] - a[:, None, :]))
-    counts = (dist < LINE_INLIER_M).sum(axis=1)
-    return dist[int(np.argmax(counts))] < LINE_INLIER_M
+    best = best_hypothesis(len(v), lambda h: (dist[h] < LINE_INLIER_M).sum(axis=1))
+    return dist[best] < LINE_INLIER_M
 
 
 def _fit_line(p: NDArray[np.float64], inliers: NDArray[np.bool_], swap: bool, what: str
@@ -122,17 +123,22 @@ def _fit_line(p: NDArray[np.float64], inliers: NDArray[np.bool_], swap: bool, wh
     """Least squares s = c0 + c1 (r − r̄) over the inliers, refined twice at 3× rms. r, s = a, b (or b, a if
     swap). Returns (c0, c1, r̄, covariance (2, 2) of (c0, c1))."""
     r, s = (p[:, 1], p[:, 0]) if swap else (p[:, 0], p[:, 1])
-    keep = inliers.copy()
-    for _ in range(3):
+
+    def refit(keep: NDArray[np.bool_]) -> tuple[tuple[NDArray[np.float64], float, NDArray[np.float64]],
+                                                 NDArray[np.bool_]]:
         if keep.sum() < LINE_MIN_POINTS:
             raise InputError(f"laser: only {int(keep.sum())} points on the {what}, too few for a line "
                              f"(need {LINE_MIN_POINTS})", "clear the laser's view of the walls")
         rm = float(r[keep].mean())
         X = np.column_stack([np.ones(int(keep.sum())), r[keep] - rm])
-        coef, *_ = np.linalg.lstsq(X, s[keep], rcond=None)
-        resid = s - coef[0] - coef[1] * (r - rm)
+        coef = np.asarray(np.linalg.lstsq(X, s[keep], rcond=None)[0], dtype=np.float64)
+        resid = np.asarray(s - coef[0] - coef[1] * (r - rm), dtype=np.float64)
         rms = float(np.sqrt(np.mean(resid[keep] ** 2)))
-        keep = inliers & (np.abs(resid) < max(3.0 * rms, 1e-4))
+        return (coef, rm, resid), inliers & (np.abs(resid) < max(3.0 * rms, 1e-4))
+
+    fitted, keep = refine(inliers.copy(), refit, rounds=3)
+    assert fitted is not None  # without min_inliers every round fits (or raises)
+    coef, rm, resid = fitted
     sigma2 = float(np.sum(resid[keep] ** 2)) / max(int(keep.sum()) - 2, 1)
     X = np.column_stack([np.ones(int(keep.sum())), r[keep] - rm])
     return float(coef[0]), float(coef[1]), rm, sigma2 * np.linalg.inv(X.T @ X)

@@ -32,10 +32,12 @@ from typing import Any
 import numpy as np
 
 from geometry.errors import InputError
+from geometry.polyline import distances_to_polyline, nearest_segments
+from geometry.robust import fit_line
 from scanner.peaks import PeakConfig, detect_peaks
 from scanner.priors import SOCKET_NEAR_M, Priors, wall_priors
 from scanner.sensor_model import additive_units
-from scanner.wall import Wall, distance_to_polyline
+from scanner.wall import Wall
 
 REACH_TOLERANCE_M = 1e-6
 # The adaptive planner's behaviour, recorded in every log: a log is resumed only by the planner that made it.
@@ -549,7 +551,7 @@ class AdaptivePlanner:
             if not (frame.u_lo <= c[0] <= frame.u_hi and frame.v_lo <= c[1] <= frame.v_hi
                     and self._owns(frame, np.array(c))):
                 continue
-            if any(distance_to_polyline(np.array([c]), np.array([p.start_uv, p.end_uv]))[0] <= SOCKET_NEAR_M
+            if any(distances_to_polyline(np.array([c]), np.array([p.start_uv, p.end_uv]))[0] <= SOCKET_NEAR_M
                    for p in coarse):
                 continue  # a coarse pass saw the box or its cable's start: its finds are traced first anyway
             sides = [self._short(frame, "socket", "x", c[1] - r, c[0], r),
@@ -1015,9 +1017,8 @@ class _Track:
     def fit_direction(self, position_sigma_m: float, n: int = 3) -> None:
         """Direction and its σ from the last n crossings (a least-squares slope over their span)."""
         pts = np.array(self.chain.points[-n:] if self.end > 0 else self.chain.points[:n][::-1])
-        c = pts.mean(axis=0)
-        _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
-        d = vt[0] if float(vt[0] @ self.d) >= 0 else -vt[0]
+        _, u = fit_line(pts)
+        d = u if float(u @ self.d) >= 0 else -u
         span = float(np.linalg.norm(pts[-1] - pts[0]))
         self.d = d
         self.sigma = position_sigma_m * math.sqrt(12.0 / len(pts)) / max(span, 1e-3)
@@ -1025,17 +1026,11 @@ class _Track:
 
 def _distance_to_polyline(p: np.ndarray, points: list[np.ndarray]) -> tuple[float, np.ndarray | None]:
     """(distance from p to the polyline, unit direction of the nearest segment or None for a single point)."""
+    dist, seg = nearest_segments(p, np.array(points))
     if len(points) == 1:
-        return float(np.linalg.norm(p - points[0])), None
-    best, best_dir = math.inf, None
-    for a, b in itertools.pairwise(points):
-        ab = b - a
-        length2 = float(ab @ ab)
-        t = 0.0 if length2 == 0 else float(np.clip((p - a) @ ab / length2, 0.0, 1.0))
-        dist = float(np.linalg.norm(p - (a + t * ab)))
-        if dist < best:
-            best, best_dir = dist, ab / max(math.sqrt(length2), 1e-12)
-    return best, best_dir
+        return float(dist[0]), None
+    ab = points[seg[0] + 1] - points[seg[0]]
+    return float(dist[0]), ab / max(float(np.linalg.norm(ab)), 1e-12)
 
 
 def _straight_runs(points: list[np.ndarray], tolerance_m: float) -> list[np.ndarray]:

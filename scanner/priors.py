@@ -18,8 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from geometry.polyline import distances_to_polyline
 from scanner.laser import LaserConfig
-from scanner.wall import Wall, distance_to_polyline
+from scanner.wall import Wall
 
 HORIZONTAL_ZONE_M = (0.15, 0.45)  # below the ceiling and above the floor
 MIDDLE_ZONE_M = (1.00, 1.30)  # above the floor
@@ -81,7 +82,7 @@ class Priors:
             elif not along and min(a[i], b[i]) <= zone.lo_m and max(a[i], b[i]) >= zone.hi_m:
                 hits.append((zone.name, CROSS_SCORE))
         for k, socket in enumerate(self.sockets):
-            if distance_to_polyline(socket[None], np.array([a, b]))[0] <= SOCKET_NEAR_M:
+            if distances_to_polyline(socket[None], np.array([a, b]))[0] <= SOCKET_NEAR_M:
                 hits.append((f"socket {k + 1}", ALONG_SCORE))
         return hits
 

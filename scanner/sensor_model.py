@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 from scipy.special import erf
 
-from scanner.wall import AREA_KINDS, Wall, WallObject, densify, distance_to_polyline
+from geometry.polyline import densify, distances_to_polyline
+from scanner.wall import AREA_KINDS, Wall, WallObject
 
 COUNTS_FULL_SCALE = 1000  # device counts for display value 1.0
 _SQRT2 = math.sqrt(2.0)
@@ -206,7 +207,7 @@ class SensorModel:
         coupling = 0.0
         if obj.is_metal and obj.kind != "cable" and live:
             probe = densify(obj.geometry_m, 0.01) if len(obj.geometry_m) > 1 else obj.geometry_m
-            gap = min(float(distance_to_polyline(probe, c.geometry_m).min()) for c in live)
+            gap = min(float(distances_to_polyline(probe, c.geometry_m).min()) for c in live)
             coupling = math.exp(-gap / cfg.ac_coupling_length_m)
         if obj.kind == "pipe":
             size = (obj.diameter_m or 0.015) / 0.015
@@ -271,7 +272,7 @@ class SensorModel:
         if cfg.holder_metal_uv_m and drive_uv is not None:
             uv = np.asarray(drive_uv, dtype=np.float64).reshape(-1, 2)
             for line in cfg.holder_metal_uv_m:
-                gap = distance_to_polyline(uv, np.asarray(line, dtype=np.float64))
+                gap = distances_to_polyline(uv, np.asarray(line, dtype=np.float64))
                 r = np.hypot(gap, cfg.holder_standoff_m)
                 out[:, 0] += cfg.holder_strength * np.exp(-(r - cfg.holder_standoff_m) / cfg.holder_decay_m)
         return out

@@ -70,7 +70,6 @@ the value.
 from __future__ import annotations
 
 import hashlib
-import itertools
 import json
 import math
 from dataclasses import dataclass, field
@@ -81,6 +80,7 @@ import numpy as np
 import yaml
 
 from geometry.errors import InputError
+from geometry.polyline import densify, distances_to_polyline, polyline_length
 
 FORMAT = "arproj-wall/1"
 WALL_MATERIALS = ("drywall", "wood", "brick", "concrete", "aerated_concrete")
@@ -170,7 +170,7 @@ class WallObject:
         """Polyline length in metres (0 for points and areas)."""
         if self.kind not in LINE_KINDS:
             return 0.0
-        return float(np.linalg.norm(np.diff(self.geometry_m, axis=0), axis=1).sum())
+        return polyline_length(self.geometry_m)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"kind": self.kind, "id": self.id}
@@ -588,41 +588,13 @@ def random_wall(seed: int, width_m: float = 2.5, height_m: float = 2.0, n_pipes:
 
 def _too_close(points: np.ndarray, objects: list[WallObject], min_sep: float) -> bool:
     """True if the polyline comes within min_sep of an existing pipe/cable (crossings excepted)."""
-    probe = _densify(points, 0.02)
+    probe = densify(points, 0.02)
     for obj in objects:
         if obj.kind not in LINE_KINDS:
             continue
-        d = distance_to_polyline(probe, obj.geometry_m)
+        d = distances_to_polyline(probe, obj.geometry_m)
         near = d < min_sep
         # A perpendicular crossing touches only briefly; a parallel run stays close: reject only the latter.
         if near.sum() * 0.02 > 2.5 * min_sep:
             return True
     return False
-
-
-def _densify(points: np.ndarray, step: float) -> np.ndarray:
-    out = [points[:1]]
-    for a, b in itertools.pairwise(points):
-        n = max(1, math.ceil(np.linalg.norm(b - a) / step))
-        t = np.linspace(0, 1, n + 1)[1:, None]
-        out.append(a + t * (b - a))
-    return np.concatenate(out)
-
-
-def distance_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
-    """Distance of each point to a polyline. points : (n, 2), polyline : (m, 2), metres -> (n,) metres."""
-    points = np.asarray(points, dtype=np.float64)
-    polyline = np.asarray(polyline, dtype=np.float64)
-    if len(polyline) == 1:
-        return np.linalg.norm(points - polyline[0], axis=1)
-    best = np.full(len(points), np.inf)
-    for a, b in itertools.pairwise(polyline):
-        ab = b - a
-        t = np.clip(((points - a) @ ab) / max(float(ab @ ab), 1e-18), 0.0, 1.0)
-        best = np.minimum(best, np.linalg.norm(points - (a + t[:, None] * ab), axis=1))
-    return best
-
-
-def densify(points: np.ndarray, step_m: float) -> np.ndarray:
-    """Points along a polyline at most step_m apart, (k, 2) metres (public for evaluation code)."""
-    return _densify(np.asarray(points, dtype=np.float64), step_m)

@@ -2,8 +2,8 @@
 
 Layers, lowest first: geometry ← {scanner, calibration, wallpose, render, devices} ← mapping ← arproj. shaders is
 data (any package may load it; it imports none). A package imports from its own layer only along the sibling
-pairs listed below, which must stay acyclic. More checks over the same graph (module cycles, private names
-across modules) go beside these, reading tests.support.import_graph.
+pairs listed below, which must stay acyclic. No module takes a private name (`_name`) from another module of
+the product. More checks over the same graph (module cycles) go beside these, reading tests.support.import_graph.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from tests.support.import_graph import (
     find_cycle,
     layer_violations,
     package_edges,
+    private_imports,
     product_imports,
     read_imports,
 )
@@ -79,6 +80,11 @@ def test_the_allowed_sibling_imports_exist_and_are_acyclic(imports: list[Import]
     assert find_cycle(SIBLING_IMPORTS) is None
 
 
+def test_no_private_name_is_imported_across_modules(imports: list[Import]) -> None:
+    problems = private_imports(imports, PACKAGES)
+    assert not problems, "\n".join(problems)
+
+
 # ---- the checker itself, on small made-up modules ------------------------------------------------------------
 
 FAKE = Path("fake.py")
@@ -135,3 +141,25 @@ def test_checker_reads_a_tree_on_disk(tmp_path: Path) -> None:
 def test_find_cycle() -> None:
     assert find_cycle({("a", "b"), ("b", "c")}) is None
     assert find_cycle({("a", "b"), ("b", "c"), ("c", "a"), ("c", "d")}) == ["a", "b", "c", "a"]
+
+
+@pytest.mark.parametrize(("source", "importer", "complaint"), [
+    ("from mapping.objects import MapObject, _join\n", "mapping.sparse", "private _join from mapping.objects"),
+    ("from .fusion import _raw as raw\n", "mapping.sparse", "private _raw from mapping.fusion"),
+    ("def f():\n    from scanner.plan import _straight_runs\n", "arproj.bench.scan", "private _straight_runs"),
+    ("import render._gl_private\n", "arproj.sim.site", "private render._gl_private"),
+])
+def test_private_check_flags_a_made_up_import(source: str, importer: str, complaint: str) -> None:
+    found = read_imports(source, importer, FAKE)
+    (problem,) = private_imports(found, PACKAGES)
+    assert problem.startswith("fake.py:") and complaint in problem
+
+
+@pytest.mark.parametrize(("source", "importer"), [
+    ("from mapping.objects import MapObject, join_polylines\n", "mapping.sparse"),  # public names
+    ("from geometry import __version__\n", "arproj.cli"),                           # a dunder is public
+    ("from scipy.optimize._numdiff import approx_derivative\n", "calibration.bundle"),  # not the product's
+    ("from render._gl_private import make\n", "render.gl"),                          # inside its own package
+])
+def test_private_check_passes_a_made_up_import(source: str, importer: str) -> None:
+    assert private_imports(read_imports(source, importer, FAKE), PACKAGES) == []

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from geometry.robust import fit_plane
 from wallpose import limits
 from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
 from wallpose.pattern import CheckerPattern
@@ -133,9 +134,7 @@ def estimate_plane_baseline(image_left: NDArray[np.uint8], image_right: NDArray[
     points = triangulate_stereo(left, right, views.T_camera_right_from_camera_left)
     if not np.all(np.isfinite(points)):
         raise NotEnoughEvidenceError(EvidenceCode.NO_PATTERN, "the square's corners do not triangulate")
-    centroid = points.mean(axis=0)
-    centred = points - centroid
-    normal = np.linalg.eigh(centred.T @ centred)[1][:, 0]
+    centroid, normal = fit_plane(points)
     p = normal / (normal @ centroid)
     nd = plane_in_frame(p, views.T_robot_from_camera_left)
     T = views.T_robot_from_camera_left

@@ -20,9 +20,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.intrinsics import Intrinsics
-from geometry.poses import invert, make_pose, transform_points
+from geometry.poses import invert, pose_from_vector, transform_points
+from geometry.robust import best_hypothesis, draw_samples, principal_axes, refine
 from wallpose import limits
-from wallpose.plane import rotations
 from wallpose.rig import ViewRig
 
 EDGE_NAMES = ("left corner", "right corner", "floor line", "ceiling line")
@@ -82,12 +82,6 @@ def wall_edges(T_room_from_wall: NDArray[np.float64], size_m: tuple[float, float
             WallEdge("floor line", pts["ll"], pts["lr"]), WallEdge("ceiling line", pts["ul"], pts["ur"])]
 
 
-def undistorted_pixels(intr: Intrinsics, pixels: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(n, 2) image pixels → (n, 2) undistorted pixels (the ideal pinhole image with the same K)."""
-    rays = intr.rays(pixels)
-    return np.column_stack([intr.fx * rays[:, 0] + intr.cx, intr.fy * rays[:, 1] + intr.cy])
-
-
 def project_undistorted(intr: Intrinsics, points_cam: NDArray[np.float64]) -> NDArray[np.float64]:
     """(n, 3) camera-frame points → (n, 2) undistorted pixels."""
     z = points_cam[:, 2]
@@ -111,11 +105,6 @@ def _hidden(camera_room: NDArray, points_room: NDArray, walls: list[tuple[NDArra
         inside = (local[:, 0] > 0) & (local[:, 0] < width) & (local[:, 1] > 0) & (local[:, 1] < height)
         hidden |= before & inside
     return hidden
-
-
-def _exp(delta: NDArray[np.float64]) -> NDArray[np.float64]:
-    """exp of δ = (rotation vector, translation) as a 4x4 pose."""
-    return make_pose(rotations(delta[None, :3])[0], delta[3:])
 
 
 def _gray(image: NDArray) -> NDArray[np.float32]:
@@ -174,7 +163,7 @@ def _predict(edge: WallEdge, cam: CameraImage, T_room_from_robot: NDArray, delta
     """Dense samples of the edge: room points (n, 3), camera-frame points (n, 3), image pixels (n, 2)."""
     lam = np.linspace(0.0, 1.0, limits.EDGE_SAMPLES_3D)
     pts = edge.start_room + lam[:, None] * (edge.end_room - edge.start_room)
-    T = T_room_from_robot if delta is None else T_room_from_robot @ _exp(delta)
+    T = T_room_from_robot if delta is None else T_room_from_robot @ pose_from_vector(delta)
     T_cam_from_room = invert(T @ cam.T_robot_from_camera)
     pc = transform_points(T_cam_from_room, pts)
     px = np.full((len(pts), 2), np.nan)
@@ -261,7 +250,7 @@ def _find_edge(edge: WallEdge, cam: CameraImage, others: list, T_room_from_robot
     prof_i, off, sign, contrast = cand.T
     prof_i = prof_i.astype(int)
     raw = centre[prof_i] + off[:, None] * normal[prof_i]
-    und = undistorted_pixels(intr, raw)
+    und = intr.undistorted_pixels(raw)
     # the predicted line's direction in undistorted pixels
     pred_und = project_undistorted(intr, transform_points(invert(T_room_from_robot @ cam.T_robot_from_camera),
                                                          pts[pick]))
@@ -321,9 +310,8 @@ def _step_candidates(profiles: NDArray[np.float32], encoded: NDArray[np.float32]
 
 def _fit_line(points: NDArray[np.float64]) -> NDArray[np.float64]:
     """Total least squares line (a, b, c), a² + b² = 1, through (n, 2) points."""
-    mean = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - mean, full_matrices=False)
-    n = vt[1]
+    mean, axes = principal_axes(points)
+    n = axes[1]
     return np.array([n[0], n[1], -n @ mean])
 
 
@@ -352,9 +340,9 @@ def _robust_line(und: NDArray, prof: NDArray, sign: NDArray, strength: NDArray, 
         _, first = np.unique(prof[order], return_index=True)
         return order[first]
 
-    best: tuple[int, NDArray, float] | None = None
-    for _ in range(limits.EDGE_RANSAC_ITERATIONS):
-        i, j = rng.choice(n_cand, 2, replace=False)
+    # hypotheses: lines through two steps of one polarity on different profiles, near the predicted direction
+    lines, polarities = [], []
+    for i, j in draw_samples(rng, n_cand, 2, limits.EDGE_RANSAC_ITERATIONS, distinct=True):
         if prof[i] == prof[j] or sign[i] != sign[j]:
             continue
         d = und[j] - und[i]
@@ -362,24 +350,29 @@ def _robust_line(und: NDArray, prof: NDArray, sign: NDArray, strength: NDArray, 
         if length < limits.EDGE_MIN_LENGTH_PX / 4 or abs(d[0] * pd[1] - d[1] * pd[0]) / length > max_sin:
             continue
         n = np.array([-d[1], d[0]]) / length
-        line = np.array([n[0], n[1], -n @ und[i]])
-        inl = inliers(line, sign[i], limits.EDGE_RANSAC_THRESHOLD_PX)
-        if best is None or len(inl) > best[0]:
-            best = (len(inl), line, float(sign[i]))
-    if best is None or best[0] < limits.EDGE_MIN_POINTS:
+        lines.append(np.array([n[0], n[1], -n @ und[i]]))
+        polarities.append(float(sign[i]))
+    if not lines:
         return None
-    _, line, polarity = best
-    threshold = limits.EDGE_RANSAC_THRESHOLD_PX
-    inl = inliers(line, polarity, threshold)
-    sigma = threshold
-    for _ in range(4):
-        if len(inl) < 3:
-            return None
+
+    def support(h: slice) -> list[int]:
+        return [len(inliers(lines[k], polarities[k], limits.EDGE_RANSAC_THRESHOLD_PX))
+                for k in range(*h.indices(len(lines)))]
+
+    best = best_hypothesis(len(lines), support)
+    line, polarity = lines[best], polarities[best]
+    inl = inliers(line, polarity, limits.EDGE_RANSAC_THRESHOLD_PX)
+    if len(inl) < limits.EDGE_MIN_POINTS:
+        return None
+
+    def refit(inl: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         line = _fit_line(und[inl])
         r = und[inl] @ line[:2] + line[2]
         sigma = float(1.4826 * np.median(np.abs(r - np.median(r))))
         threshold = max(limits.EDGE_INLIER_SIGMAS * sigma, limits.EDGE_INLIER_FLOOR_PX)
-        inl = inliers(line, polarity, threshold, float(np.median(strength[inl])))
+        return line, inliers(line, polarity, threshold, float(np.median(strength[inl])))
+
+    _, inl = refine(inl, refit, rounds=4, min_inliers=3)
     if len(inl) < 3:
         return None
     line = _fit_line(und[inl])

@@ -16,14 +16,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from geometry.poses import rotation_matrices, rotation_matrix
+from geometry.robust import best_hypothesis, draw_samples, fit_plane
 from wallpose import limits
 
 
 def plane_from_points(points: NDArray[np.float64]) -> NDArray[np.float64]:
     """Least-squares plane p (X·p = 1) through (n >= 3, 3) points; the plane must not pass through the origin."""
-    centroid = points.mean(axis=0)
-    centred = points - centroid
-    normal = np.linalg.eigh(centred.T @ centred)[1][:, 0]
+    centroid, normal = fit_plane(points)
     offset = normal @ centroid
     if abs(offset) < 1e-9:
         return np.full(3, np.nan)
@@ -57,7 +57,7 @@ def ransac_plane(points_left: NDArray[np.float64], normalized_left: NDArray[np.f
     n = len(points_left)
     if n < 3:
         return np.full(3, np.nan), np.zeros(n, dtype=bool)
-    samples = np.array([rng.choice(n, 3, replace=False) for _ in range(iterations)])
+    samples = draw_samples(rng, n, 3, iterations, distinct=True)
     tri = points_left[samples]                                           # (h, 3, 3)
     # p solves tri @ p = 1 for each hypothesis
     det = np.linalg.det(tri)
@@ -68,9 +68,13 @@ def ransac_plane(points_left: NDArray[np.float64], normalized_left: NDArray[np.f
     # hypotheses are ranked on an even subset of the corners (a few hundred tell the best plane as well as all
     # of them); the winner's inliers are counted on all
     score = np.unique(np.linspace(0, n - 1, min(n, limits.RANSAC_SCORE_CORNERS)).astype(np.int64))
-    err = transfer_residuals_px(hyp, normalized_left[score], normalized_right[score], T_right_from_left, f_right)
-    counts = (err < threshold_px).sum(axis=1)
-    best = int(np.argmax(counts))
+
+    def support(h: slice) -> NDArray[np.int64]:
+        err = transfer_residuals_px(hyp[h], normalized_left[score], normalized_right[score], T_right_from_left,
+                                    f_right)
+        return (err < threshold_px).sum(axis=1)
+
+    best = best_hypothesis(len(hyp), support)
     inliers = transfer_residuals_px(hyp[best], normalized_left, normalized_right, T_right_from_left,
                                     f_right)[0] < threshold_px
     if inliers.sum() >= 3:
@@ -93,21 +97,6 @@ class ViewData:
     f: float
     seen: NDArray[np.bool_]
     normalized: NDArray[np.float64]
-
-
-def rotations(w: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rodrigues' formula for many rotation vectors: (k, 3) -> (k, 3, 3)."""
-    theta = np.linalg.norm(w, axis=1)
-    small = theta < 1e-12
-    safe = np.where(small, 1.0, theta)
-    k = w / safe[:, None]
-    K = np.zeros((len(w), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
-    s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
-    R = np.eye(3)[None] + s * K + (1.0 - c) * (K @ K)
-    R[small] = np.eye(3)
-    return R
 
 
 # Parameter layout of the maximum-likelihood model.
@@ -156,7 +145,7 @@ class MLModel:
 
     def projector_pose(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
         dT = np.eye(4)
-        dT[:3, :3] = rotations(theta[None, PROJ_ROT])[0]
+        dT[:3, :3] = rotation_matrix(theta[PROJ_ROT])
         dT[:3, 3] = theta[PROJ_TRANS]
         return self.T_left_from_projector @ dT
 
@@ -164,7 +153,7 @@ class MLModel:
         """(k, n, 3) left-frame points where the projector rays meet the plane, for k parameter vectors."""
         rays = self.projector_rays if rays is None else rays
         R0, t0 = self.T_left_from_projector[:3, :3], self.T_left_from_projector[:3, 3]
-        dR = rotations(thetas[:, PROJ_ROT])
+        dR = rotation_matrices(thetas[:, PROJ_ROT])
         R = R0[None] @ dR                                                  # (k, 3, 3)
         o = t0[None] + thetas[:, PROJ_TRANS] @ R0.T                        # (k, 3)
         a = thetas[:, PROJ_AFFINE]

@@ -20,12 +20,11 @@ from numpy.typing import NDArray
 
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
-from geometry.poses import invert, make_pose, transform_points
+from geometry.poses import invert, pose_from_vector, transform_points
 from wallpose import limits
 from wallpose.edges import CameraImage, EdgeObservation, Projector, find_wall_edges, project_undistorted
 from wallpose.estimate import PlaneEstimate
 from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
-from wallpose.plane import rotations
 
 POSE_ITERATIONS = 6
 LASER_GATES_M = (0.4, 0.15, limits.LASER_GATE_M)  # association gates, coarse to fine (localization can be off)
@@ -63,10 +62,6 @@ class RoomMap:
 
     T_room_from_walls: list[NDArray[np.float64]]
     sizes_m: list[tuple[float, float]]
-
-
-def _exp(delta: NDArray[np.float64]) -> NDArray[np.float64]:
-    return make_pose(rotations(delta[None, :3])[0], delta[3:])
 
 
 def _plane_whitener(plane: PlaneEstimate) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -114,7 +109,7 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
     edge_block: list[tuple[EdgeObservation, NDArray[np.float64], Intrinsics, NDArray[np.float64]]] = []
 
     def residuals(delta: NDArray[np.float64], gate: float) -> NDArray[np.float64]:
-        T = T0 @ _exp(delta)
+        T = T0 @ pose_from_vector(delta)
         out = [delta[[3, 4]] / localization_sigma_m, delta[[2]] / np.radians(localization_sigma_deg),
                [T[2, 3] / limits.FLOOR_HEIGHT_SIGMA_M],
                T[:2, 2] / np.radians(limits.FLOOR_TILT_SIGMA_DEG)]
@@ -159,8 +154,8 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
     if camera_images:
         cameras = {cam.name: cam for cam in camera_images}
         lit = None if projector is None else Projector(projector, np.asarray(T_robot_from_projector, dtype=float))
-        found = find_wall_edges(list(camera_images), room.T_room_from_walls, room.sizes_m, wall, T0 @ _exp(delta),
-                                covariance, projector=lit)
+        found = find_wall_edges(list(camera_images), room.T_room_from_walls, room.sizes_m, wall,
+                                T0 @ pose_from_vector(delta), covariance, projector=lit)
         for obs in found:
             cam = cameras[obs.camera]
             T_rc = np.asarray(cam.T_robot_from_camera, dtype=np.float64)
@@ -170,7 +165,7 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
             edge_block.append((obs, T_rc, cam.intrinsics, np.linalg.inv(np.linalg.cholesky(obs.covariance))))
         while edge_block:
             delta_e, J_e = solve(delta, gates[-1:])
-            T_e = T0 @ _exp(delta_e)
+            T_e = T0 @ pose_from_vector(delta_e)
             # after fusing: an edge that still disagrees with everything else is dropped (and the rest refitted)
             chi2 = [float(np.sum((W @ _edge_offsets(o, T_e @ T_rc, intr)) ** 2)) for o, T_rc, intr, W in edge_block]
             worst = int(np.argmax(chi2))
@@ -182,7 +177,7 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
             del edge_block[worst]
         if edge_block:
             sources.append("camera edges (" + ", ".join(f"{o.edge} in {o.camera}" for o, *_ in edge_block) + ")")
-    T_room_from_robot = T0 @ _exp(delta)
+    T_room_from_robot = T0 @ pose_from_vector(delta)
     T_wall_from_robot = T_wall_from_room @ T_room_from_robot
     T_robot_from_projector = np.asarray(T_robot_from_projector, dtype=np.float64)
     T_projector_from_robot = invert(T_robot_from_projector)
@@ -227,7 +222,7 @@ def _edge_innovation(obs: EdgeObservation, T0: NDArray, delta: NDArray, covarian
                      T_robot_from_camera: NDArray, intr: Intrinsics) -> float:
     """Mahalanobis² of an edge line against where the pose (δ, covariance) without it predicts it."""
     def offsets(d: NDArray[np.float64]) -> NDArray[np.float64]:
-        return _edge_offsets(obs, T0 @ _exp(d) @ T_robot_from_camera, intr)
+        return _edge_offsets(obs, T0 @ pose_from_vector(d) @ T_robot_from_camera, intr)
 
     z = offsets(delta)
     G = _numeric_jacobian(offsets, delta, z)
@@ -250,7 +245,7 @@ def _check_innovation(whiten: NDArray, basis: NDArray, measured: NDArray, T0: ND
     for k in range(6):
         h = np.zeros(6)
         h[k] = 1e-7
-        G[:, k] = (basis @ (_predicted_plane(T0 @ _exp(h), T_wall_from_room) - measured) - z0) / 1e-7
+        G[:, k] = (basis @ (_predicted_plane(T0 @ pose_from_vector(h), T_wall_from_room) - measured) - z0) / 1e-7
     tilt = np.radians(limits.FLOOR_TILT_SIGMA_DEG)
     prior = np.diag([tilt, tilt, np.radians(sigma_deg), sigma_m, sigma_m, limits.FLOOR_HEIGHT_SIGMA_M]) ** 2
     cov_z = np.linalg.inv(whiten.T @ whiten)

@@ -21,8 +21,8 @@ NAN = float("nan")
 def _peaks_peer(data, wall) -> list[float]:
     """The paper's way to place objects: 1-D peaks of each raw pass (scanner.peaks), no map, no fusion.
     Returns distances (m) of the peak positions to the nearest pipe/cable (matched within 15 mm)."""
+    from geometry.polyline import distances_to_polyline
     from scanner.peaks import PeakConfig, detect_peaks
-    from scanner.wall import distance_to_polyline
 
     s = data.samples
     real = [o.points_m for o in wall.objects if o.kind in ("pipe", "cable")]
@@ -41,7 +41,7 @@ def _peaks_peer(data, wall) -> list[float]:
                 k = int(np.argmin(np.abs(along[order] - p.position)))
                 point = xy[order][k].copy()
                 point[0 if s["axis"][a] == 0 else 1] = p.position
-                d = min(float(distance_to_polyline(point[None], r)[0]) for r in real)
+                d = min(float(distances_to_polyline(point[None], r)[0]) for r in real)
                 if d < 0.015:
                     out.append(d)
     return out

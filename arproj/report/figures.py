@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 from pathlib import Path
 from typing import Any
 
@@ -11,20 +10,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.intrinsics import Intrinsics
+from geometry.polyline import densify
 from geometry.poses import invert, transform_points
 
 TRUTH_COLOUR = (255, 255, 255)
 TRUTH_SHADOW = (0, 0, 0)
 DASH_PX = 10  # dash and gap length of the truth lines in the photograph
-
-
-def _densify(points: NDArray[np.float64], step_m: float) -> NDArray[np.float64]:
-    """Polyline (n, 2) resampled so consecutive points are at most step_m apart."""
-    out = [points[:1]]
-    for a, b in itertools.pairwise(points):
-        n = max(1, int(np.ceil(np.linalg.norm(b - a) / step_m)))
-        out.append(a + np.linspace(0.0, 1.0, n + 1)[1:, None] * (b - a))
-    return np.concatenate(out)
 
 
 def draw_truth_on_photo(image: NDArray[np.uint8], wall: Any, T_room_from_wall: NDArray[np.float64],
@@ -44,7 +35,7 @@ def draw_truth_on_photo(image: NDArray[np.uint8], wall: Any, T_room_from_wall: N
         closed = obj.kind in ("stud", "beam", "plate")
         if closed:
             geometry = np.concatenate([geometry, geometry[:1]])
-        points = _densify(geometry, step_m) if len(geometry) > 1 else geometry
+        points = densify(geometry, step_m) if len(geometry) > 1 else geometry
         cam = transform_points(T_camera_from_wall, np.column_stack([points, np.zeros(len(points))]))
         front = cam[:, 2] > 0.05
         if not front.any():

@@ -18,14 +18,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from arproj.session import tolerances as tol
-from geometry.intrinsics import Intrinsics
-from geometry.poses import transform_points
 
 HEAD_COMMAND_TOLERANCE_DEG = 0.05
 ROBOT_MOTION_TOLERANCE_M = 0.003   # at the wall: translation plus heading change × distance
@@ -99,28 +96,6 @@ def decide(ev: RegistrationEvidence, tolerance_m: float = tol.REGISTRATION_TOLER
                        "tolerance")
     registration_sigma = float(max(sigma, loop_max / tol.Z95)) if np.isfinite(sigma) else np.inf
     return GateDecision(not reasons, reasons, registration_sigma, float(bound))
-
-
-# -- stereo triangulation of check marks ------------------------------------------------------------------
-def triangulate(left: Intrinsics, right: Intrinsics, T_right_from_left: NDArray[np.float64],
-                uv_left: NDArray[np.float64], uv_right: NDArray[np.float64]
-                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Points (n, 3) in the left camera frame from matched pixels (n, 2), and each one's RMS reprojection
-    residual (n,) in pixels (large when the rig file does not describe these cameras)."""
-    uv_left = np.asarray(uv_left, dtype=np.float64).reshape(-1, 2)
-    uv_right = np.asarray(uv_right, dtype=np.float64).reshape(-1, 2)
-    if len(uv_left) == 0:
-        return np.zeros((0, 3)), np.zeros(0)
-    xl = left.rays(uv_left)[:, :2]
-    xr = right.rays(uv_right)[:, :2]
-    P1 = np.hstack([np.eye(3), np.zeros((3, 1))])
-    P2 = np.asarray(T_right_from_left, dtype=np.float64)[:3, :]
-    X = cv2.triangulatePoints(P1, P2, xl.T, xr.T)
-    points = (X[:3] / X[3]).T
-    pl = left.project(points)
-    pr = right.project(transform_points(T_right_from_left, points))
-    residual = np.sqrt(0.5 * (np.sum((pl - uv_left) ** 2, axis=1) + np.sum((pr - uv_right) ** 2, axis=1)))
-    return points, residual
 
 
 # -- laser scan matching (robot moved?) -------------------------------------------------------------------

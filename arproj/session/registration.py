@@ -18,6 +18,8 @@ from arproj.session import gate
 from arproj.session import tolerances as tol
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, make_pose, transform_points
+from geometry.robust import refine
+from geometry.triangulation import reprojection_residuals, triangulate
 
 MARK_MIN_CAMERA_PX = 3.5       # check-mark radius as seen by a camera, at least
 MARK_SEARCH_FACTOR = 3.0       # search window radius, in mark radii
@@ -284,7 +286,9 @@ def measure_marks(marks_xy: NDArray[np.float64], uv_left: NDArray[np.float64], u
     every mark's rays miss each other.
     """
     seen = np.all(np.isfinite(uv_left), axis=1) & np.all(np.isfinite(uv_right), axis=1)
-    _, residual = gate.triangulate(camera_left, camera_right, T_right_from_left, uv_left[seen], uv_right[seen])
+    points = triangulate(camera_left, camera_right, T_right_from_left, uv_left[seen], uv_right[seen])
+    residual = reprojection_residuals(camera_left, camera_right, T_right_from_left, points, uv_left[seen],
+                                      uv_right[seen])
     rms = float(np.sqrt(np.mean(residual ** 2))) if len(residual) else float("nan")
     T_wall_from_right = T_wall_from_camera_left @ invert(T_right_from_left)
     xy_l = _ray_plane_xy(camera_left, uv_left[seen], T_wall_from_camera_left)
@@ -323,10 +327,15 @@ def laser_plane_offset_m(T_wall_from_robot: NDArray[np.float64], laser_points_ro
     if near.sum() < LASER_MIN_POINTS:
         return float("nan")
     x, z = w[near, 0] - centre_x, w[near, 2]
-    keep = np.ones(len(z), dtype=bool)
-    for _ in range(3):  # line fit with outlier rejection (laser outliers return short ranges)
+
+    def refit(keep: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         A = np.column_stack([np.ones(keep.sum()), x[keep]])
         (a, b), *_ = np.linalg.lstsq(A, z[keep], rcond=None)
         r = z - (a + b * x)
-        keep = np.abs(r) < max(3.0 * 1.4826 * np.median(np.abs(r[keep])), 0.005)
+        return np.array([a, b]), np.abs(r) < max(3.0 * 1.4826 * np.median(np.abs(r[keep])), 0.005)
+
+    # line fit with outlier rejection (laser outliers return short ranges)
+    line, _ = refine(np.ones(len(z), dtype=bool), refit, rounds=3)
+    assert line is not None  # without min_inliers every round fits
+    a, b = line
     return float(abs(a) + abs(b) * LASER_WINDOW_M)

@@ -25,7 +25,6 @@ from calibration.validation import (
     GridMeasurement,
     ProjectedGrid,
     cast_onto_plane,
-    fit_plane,
     measure_grid,
     projected_charuco,
     validate_grid,
@@ -34,6 +33,7 @@ from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, rotation_angle_deg
 from geometry.rig import Rig
+from geometry.robust import fit_plane
 
 STEREO_POSES = 24
 PROJECTOR_SQUARE_PX = 64  # projected ChArUco board for projector calibration

@@ -3,16 +3,7 @@
 import cv2
 import numpy as np
 
-from calibration.camera_model import project, rodrigues_batch
-
-
-def test_rodrigues_batch_matches_opencv() -> None:
-    rng = np.random.default_rng(0)
-    rvecs = rng.normal(0, 1.0, (20, 3))
-    rvecs[0] = 0.0
-    R = rodrigues_batch(rvecs)
-    for v, M in zip(rvecs, R, strict=True):
-        assert np.allclose(M, cv2.Rodrigues(v)[0], atol=1e-12)  # entries of order 1: ~5000 float64 ulps of slack
+from calibration.camera_model import project
 
 
 def test_project_matches_cv2_project_points() -> None:

@@ -4,7 +4,15 @@ import pytest
 
 from geometry import InputError, invert, look_at, make_pose, pose_from_rvec_tvec, rotation_about
 from geometry.frames import parse_pose_name
-from geometry.poses import rotation_angle_deg, rvec_tvec_from_pose, transform_points
+from geometry.poses import (
+    pose_from_vector,
+    rotation_angle_deg,
+    rotation_matrices,
+    rotation_matrix,
+    rotation_vector,
+    rvec_tvec_from_pose,
+    transform_points,
+)
 
 
 def test_invert_and_chain_read_right_to_left() -> None:
@@ -60,3 +68,38 @@ def test_rotation_angle_is_exact_from_tiny_to_half_turn(angle_rad: float) -> Non
     # Relative error of a few float64 ulps of the matrix entries: 1e-9 relative allows the products inside.
     assert rotation_angle_deg(R) == pytest.approx(np.degrees(angle_rad), rel=1e-9, abs=1e-14)
     assert rotation_angle_deg(np.eye(3), R) == pytest.approx(np.degrees(angle_rad), rel=1e-9, abs=1e-14)
+
+
+def test_rotation_matrices_are_opencvs_rodrigues() -> None:
+    rng = np.random.default_rng(9)
+    rvecs = np.vstack([rng.normal(size=(20, 3)) * rng.uniform(1e-9, 3.0, (20, 1)), np.zeros((1, 3)),
+                       [[np.pi, 0.0, 0.0]]])
+    R = rotation_matrices(rvecs)
+    for v, M in zip(rvecs, R, strict=True):
+        # entries of order 1 from a few dozen operations in either library: ~100 eps
+        np.testing.assert_allclose(M, cv2.Rodrigues(v)[0], rtol=0, atol=100 * np.finfo(float).eps)
+        np.testing.assert_array_equal(rotation_matrix(v), M)
+    assert R.shape == (22, 3, 3) and rotation_matrices(np.zeros(3)).shape == (1, 3, 3)
+
+
+def test_rotation_vector_is_the_log_map() -> None:
+    rng = np.random.default_rng(10)
+    for v in [*rng.normal(size=(10, 3)), np.zeros(3), np.array([1e-9, -2e-9, 0.0])]:
+        v = v if np.linalg.norm(v) < np.pi else v / np.linalg.norm(v) * 3.0
+        # there and back: round-off on angles up to 3 rad, ~1e-15
+        np.testing.assert_allclose(rotation_vector(rotation_matrix(v)), v, rtol=0, atol=1e-12)
+    assert np.linalg.norm(rotation_vector(rotation_about([0, 0, 1], np.pi))) == pytest.approx(np.pi, abs=1e-12)
+    # cv2.Rodrigues agrees on ordinary angles (to ~1e-9: it loses digits there) but reads rotations below
+    # ~1e-5 rad as none, which would flatten the head fit's small residuals
+    v = np.array([0.3, -0.2, 0.5])
+    np.testing.assert_allclose(rotation_vector(rotation_matrix(v)), cv2.Rodrigues(rotation_matrix(v))[0].ravel(),
+                               rtol=0, atol=1e-8)
+    assert not cv2.Rodrigues(rotation_matrix([5e-6, 0, 0]))[0].any()
+    assert rotation_vector(rotation_matrix([5e-6, 0, 0]))[0] == pytest.approx(5e-6, rel=1e-9)
+
+
+def test_pose_from_vector_is_rvec_then_tvec() -> None:
+    x = np.array([0.1, -0.3, 0.2, 0.05, -0.02, 1.5])
+    np.testing.assert_array_equal(pose_from_vector(x), pose_from_rvec_tvec(x[:3], x[3:]))
+    with pytest.raises(ValueError):
+        pose_from_vector(x[:5])

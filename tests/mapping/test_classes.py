@@ -17,6 +17,7 @@ import pytest
 from numpy.typing import NDArray
 
 from geometry.errors import InputError
+from geometry.polyline import densify, distances_to_polyline
 from mapping.evaluate import MIN_COVERAGE, false_safe, truth_class
 from mapping.fusion import METAL_CLASSES
 from mapping.mapfile import parse_object
@@ -25,7 +26,7 @@ from mapping.pipeline import MapResult, build_map
 from mapping.simscan import simulate_scan
 from scanner.hard_walls import hard_case_wall
 from scanner.sensor_model import points_in_polygon
-from scanner.wall import FORMAT, Wall, WallObject, densify, distance_to_polyline, wall_from_dict
+from scanner.wall import FORMAT, Wall, WallObject, wall_from_dict
 
 ON_M = 0.02  # a mapped object within 2 cm of a true centre line lies on it (10 σ of the 2 mm position σ)
 STEP_M = 0.005  # true centre lines and mapped geometry are probed every 5 mm
@@ -114,7 +115,7 @@ def _share_along(probe: NDArray[np.float64], objects: list[MapObject]) -> float:
         if o.kind == "outline":
             hit |= points_in_polygon(probe, o.points_m)
         elif len(o.points_m) > 1:
-            hit |= distance_to_polyline(probe, o.points_m) <= ON_M
+            hit |= distances_to_polyline(probe, o.points_m) <= ON_M
     return float(hit.mean())
 
 
@@ -125,7 +126,7 @@ def _lies_on(obj: MapObject, truth: NDArray[np.float64]) -> bool:
     if obj.kind == "outline":
         return bool(points_in_polygon(probe, obj.points_m).mean() > 0.1)
     pts = densify(obj.points_m, STEP_M) if len(obj.points_m) > 1 else obj.points_m
-    return bool((distance_to_polyline(pts, truth) <= ON_M).mean() > 0.5)
+    return bool((distances_to_polyline(pts, truth) <= ON_M).mean() > 0.5)
 
 
 # ---- the capacitive-only object: a water-filled plastic pipe ------------------------------------------------
@@ -165,10 +166,10 @@ def test_non_metal_objects_lie_on_wood_or_water(mapped):
         for truth in wood_or_water:
             geometry = np.asarray(truth.geometry_m, dtype=np.float64)
             if truth.kind == "pipe":
-                on_wood_or_water |= bool((distance_to_polyline(probe, geometry) <= ON_M).mean() > 0.5)
+                on_wood_or_water |= bool((distances_to_polyline(probe, geometry) <= ON_M).mean() > 0.5)
             else:  # the outline of a stud's half-maximum signal: up to a footprint σ (2.3 cm) beyond its edge
                 ring = np.vstack([geometry, geometry[:1]])
-                near = points_in_polygon(probe, geometry) | (distance_to_polyline(probe, ring) <= 0.025)
+                near = points_in_polygon(probe, geometry) | (distances_to_polyline(probe, ring) <= 0.025)
                 on_wood_or_water |= bool(near.mean() > 0.9)
         assert on_wood_or_water, (obj.kind, np.round(obj.points_m, 3).tolist())
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from geometry.polyline import distances_to_polyline
 from mapping.frame_features import (
     AMBIGUITY_MARGIN_M,
     END_INSET_M,
@@ -25,7 +26,7 @@ from mapping.objects import MapObject
 from mapping.pipeline import ScanData
 from mapping.simscan import simulate_scan
 from mapping.stitching import FrameGraph, apply_pose, seam_error
-from scanner.wall import Wall, distance_to_polyline, wall_from_dict
+from scanner.wall import Wall, wall_from_dict
 
 RESOLUTION_M = 0.004  # frame_features' default grid cell
 # Sub-cell peak and ridge refinement: a feature lies within half a cell of the truth (unrefined, a cell centre
@@ -101,7 +102,7 @@ def feature_errors(data: ScanData, per_frame: list) -> float:
         for p in points:
             worst = max(worst, nearest_screw(apply_pose(true[k], p.points_m))[1])
         for ln in lines:
-            worst = max(worst, float(distance_to_polyline(ln.points_m, to_frame(true[k], PIPE)).max()))
+            worst = max(worst, float(distances_to_polyline(ln.points_m, to_frame(true[k], PIPE)).max()))
     return worst
 
 
@@ -125,7 +126,7 @@ def test_features_are_found_at_their_true_drive_positions() -> None:
         assert sorted(found) == sorted(SEEN_BY[k])  # each screw once, nothing spurious
         assert len(lines) == 1  # the pipe, one straight run across the frame
         poly = lines[0].points_m
-        assert float(distance_to_polyline(poly, to_frame(true[k], PIPE)).max()) < FEATURE_TOL_M
+        assert float(distances_to_polyline(poly, to_frame(true[k], PIPE)).max()) < FEATURE_TOL_M
         # pairing samples END_INSET_M inside each end, so the run must reach that close to the frame's borders
         assert poly[:, 0].min() < box[0][0] + END_INSET_M and poly[:, 0].max() > box[1][0] - END_INSET_M
 
@@ -149,7 +150,7 @@ def test_pairing_joins_the_overlapping_frames_through_the_same_objects() -> None
     assert sorted((i, j) for i, j, *_ in graph.lines) == [(0, 1), (1, 2)]
     for i, j, a_i, n_i, p_j in graph.lines:
         for pose, p in ((true[i], a_i), (true[j], p_j)):  # both ends lie on the pipe
-            assert distance_to_polyline(apply_pose(pose, p), PIPE)[0] < FEATURE_TOL_M
+            assert distances_to_polyline(apply_pose(pose, p), PIPE)[0] < FEATURE_TOL_M
         # its normal is the pipe's (the wall's y) in frame i; the run's ends, each within FEATURE_TOL_M over at
         # least a frame's width, fix its direction to 2·FEATURE_TOL_M / FRAME_WIDTH_M
         n_true = to_frame(np.r_[0.0, 0.0, true[i, 2]], np.array([0.0, 1.0]))[0]

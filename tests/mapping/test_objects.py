@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from geometry.polyline import densify, distances_to_polyline
 from mapping.grid import build_grid
 from mapping.objects import background_level, extract_lines, extract_points, extract_regions
-from scanner.wall import densify, distance_to_polyline
 
 TRUTH = [
     np.array([[0.30, 0.05], [0.30, 0.95]]),  # vertical
@@ -24,7 +24,7 @@ def signal_grid():
     p = np.column_stack([X.ravel(), Y.ravel()])
     sig = np.zeros(len(p))
     for line in TRUTH:
-        sig += np.exp(-0.5 * (distance_to_polyline(p, line) / 0.008) ** 2)
+        sig += np.exp(-0.5 * (distances_to_polyline(p, line) / 0.008) ** 2)
     sig += 0.8 * np.exp(-0.5 * np.sum((p - SCREW) ** 2, axis=1) / 0.005**2)
     sig += rng.normal(0, 0.02, len(p))
     return build_grid(p, {"inductive": sig})
@@ -35,11 +35,11 @@ def test_lines_are_found_as_polylines_with_submillimetre_centres(signal_grid):
     assert len(lines) == 3  # crossings neither split nor join the lines
     for truth in TRUTH:
         probe = densify(truth, 0.01)[5:-5]  # the ends fade out over a few cm
-        d = np.stack([distance_to_polyline(probe, o.points_m) for o in lines])
+        d = np.stack([distances_to_polyline(probe, o.points_m) for o in lines])
         best = lines[int(np.argmin(d.mean(axis=1)))]
         assert (d.min(axis=0) < 0.01).mean() > 0.95  # found within one 1 cm raster spacing along 95 % of its run
         on = densify(best.points_m, 0.005)
-        err = distance_to_polyline(on, truth)
+        err = distances_to_polyline(on, truth)
         err = err[err < 0.01]
         # Sub-millimetre mean (a quarter of a 4 mm cell); 95 % within 3 mm, under one cell.
         assert np.mean(err) < 0.001 and np.percentile(err, 95) < 0.003
@@ -61,8 +61,8 @@ def test_fastener_is_a_point_and_crossings_are_not(signal_grid):
     assert len(fasteners) == 1
     assert np.linalg.norm(fasteners[0].points_m[0] - SCREW) < 0.001  # sub-millimetre, as the line centres
     for b in boxes:  # whatever peaks the crossings make are where lines meet, not fasteners
-        assert min(distance_to_polyline(b.points_m, t)[0] for t in TRUTH[:2]) < 0.01
-        assert distance_to_polyline(b.points_m, TRUTH[2])[0] < 0.01
+        assert min(distances_to_polyline(b.points_m, t)[0] for t in TRUTH[:2]) < 0.01
+        assert distances_to_polyline(b.points_m, TRUTH[2])[0] < 0.01
 
 
 def _raster(fn, seed: int, gain_sigma: float = 0.02):
@@ -90,7 +90,7 @@ def test_screws_on_a_pipe_and_on_a_steel_stud_are_points_and_the_pipe_ripple_is_
     stud_screws = np.array([[0.70, 0.15], [0.70, 0.45], [0.70, 0.70]])
 
     def signal(p):
-        out = 3.0 * np.exp(-0.5 * (distance_to_polyline(p, pipe) / 0.012) ** 2)  # a strong copper pipe
+        out = 3.0 * np.exp(-0.5 * (distances_to_polyline(p, pipe) / 0.012) ** 2)  # a strong copper pipe
         out += 3.0 * _strip(p)  # a 5 cm steel stud, its level 3 as the pipe's
         out += _blob(p, screw_on_pipe, 2.0)
         for q in stud_screws:
@@ -124,7 +124,7 @@ def test_a_peak_where_a_cable_ends_is_metal_not_a_fastener():
     box = np.array([0.61, 0.40])
 
     def signal(p):
-        return 1.0 * np.exp(-0.5 * (distance_to_polyline(p, cable) / 0.011) ** 2) + _blob(p, box, 1.0)
+        return 1.0 * np.exp(-0.5 * (distances_to_polyline(p, cable) / 0.011) ** 2) + _blob(p, box, 1.0)
 
     grid = _raster(signal, seed=6)
     lines = extract_lines(grid.signal("inductive"), grid.info)

@@ -15,17 +15,18 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
+from geometry.polyline import densify, distances_to_polyline
 from mapping import tolerances as tol
 from mapping.evaluate import truth_class
 from mapping.fusion import FusionParams, InductiveModel
-from mapping.objects import MapObject, distances_to_polyline
+from mapping.objects import MapObject
 from mapping.pipeline import ScanData
 from mapping.simscan import simulate_scan
 from mapping.sparse import MAX_GAP_M, RANSAC_INLIER_M, PassPeaks, lines_from_passes, pass_peaks, ransac_lines
 from scanner.peaks import level_crossings
 from scanner.sensor_model import SensorConfig, additive_units
 from scanner.sensor_model import SensorModel as ForwardModel
-from scanner.wall import Wall, WallObject, densify, load_wall, shipped_walls
+from scanner.wall import Wall, WallObject, load_wall, shipped_walls
 
 # σ of a half-maximum midpoint along a pass: the inductive noise (0.006) over a flank slope of ~0.014 per mm
 # is 0.4 mm per crossing, ~0.3 mm for the midpoint of two; rounded up

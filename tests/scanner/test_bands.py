@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from geometry.errors import InputError
+from geometry.polyline import densify, distances_to_polyline
 from mapping import tolerances as tol
 from mapping.evaluate import MATCH_M, evaluate, false_safe
-from mapping.objects import distances_to_polyline
 from mapping.pipeline import ScanData, build_map
 from mapping.stitching import LASER_SIGMA_FLOOR
 from scanner.log import ScanLog
@@ -32,7 +32,7 @@ from scanner.run import (
     simulated_site,
 )
 from scanner.sensor_model import SensorConfig
-from scanner.wall import Wall, WallObject, densify, save_wall
+from scanner.wall import Wall, WallObject, save_wall
 
 HEIGHT_M = 2.6
 CABLE_Y_M = 2.3  # 30 cm below a 2.6 m ceiling line: the top installation zone (15–45 cm below the ceiling)

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from geometry.polyline import densify, distances_to_polyline
 from scanner.hard_walls import (
     COARSE_ROW_SPACING_M,
     DEEP_PIPE_DEPTH_M,
@@ -17,7 +18,7 @@ from scanner.hard_walls import (
     hard_case_walls,
 )
 from scanner.sensor_model import SensorModel, points_in_polygon
-from scanner.wall import Wall, WallObject, densify, distance_to_polyline, load_wall, save_wall
+from scanner.wall import Wall, WallObject, load_wall, save_wall
 
 SEEDS = (0, 1, 2)
 
@@ -43,7 +44,7 @@ def _closed(outline: np.ndarray) -> np.ndarray:
 
 def _distance_to_area(points: np.ndarray, area: WallObject) -> np.ndarray:
     """0 inside the outline, else the distance to it. points : (n, 2) -> (n,) metres."""
-    d = distance_to_polyline(points, _closed(area.outline_m))
+    d = distances_to_polyline(points, _closed(area.outline_m))
     return np.where(points_in_polygon(points, area.outline_m), 0.0, d)
 
 
@@ -61,7 +62,7 @@ def _gap(a: WallObject, b: WallObject) -> float:
 
     def one_way(p: WallObject, q: WallObject) -> float:
         s = _samples(p)
-        return float((_distance_to_area(s, q) if q.outline_m is not None else distance_to_polyline(s, q.points_m))
+        return float((_distance_to_area(s, q) if q.outline_m is not None else distances_to_polyline(s, q.points_m))
                      .min())
     return min(one_way(a, b), one_way(b, a))
 
@@ -138,7 +139,7 @@ def _has_parallel_cables(wall: Wall) -> bool:
     for i, a in enumerate(cables):
         samples = densify(a.points_m, step)
         for b in cables[i + 1:]:
-            d = distance_to_polyline(samples, b.points_m)
+            d = distances_to_polyline(samples, b.points_m)
             if np.sum(np.abs(d - 0.05) <= 0.005) * step >= 0.30:
                 return True
     return False

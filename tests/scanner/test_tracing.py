@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
+from geometry.polyline import densify, distances_to_polyline
 from mapping.evaluate import false_safe, is_target
-from mapping.objects import distances_to_polyline
 from scanner.plan import STOPPING_RULE, AdaptivePlanner, DriveConfig, PassSpec, _straight_runs
 from scanner.run import DirectBackend, run_scan, simulated_site
 from scanner.sensor_model import SensorConfig
-from scanner.wall import Wall, densify, wall_from_dict
+from scanner.wall import Wall, wall_from_dict
 
 
 def measured_shares(mapped, wall: Wall) -> dict[str, float]:

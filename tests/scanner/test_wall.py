@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from geometry.errors import InputError
-from scanner.wall import distance_to_polyline, load_wall, random_wall, save_wall, shipped_walls
+from geometry.polyline import distances_to_polyline
+from scanner.wall import load_wall, random_wall, save_wall, shipped_walls
 
 
 def test_shipped_walls_load_and_include_the_paper_plate():
@@ -87,6 +88,6 @@ def test_random_walls_are_plausible_and_reproducible():
         # distinct objects: no two pipe/cable runs stay within 8 cm of each other over a long stretch
         for i, a in enumerate(targets):
             for b in targets[i + 1:]:
-                from scanner.wall import densify
-                close = distance_to_polyline(densify(a.points_m, 0.02), b.points_m) < 0.08
+                from geometry.polyline import densify
+                close = distances_to_polyline(densify(a.points_m, 0.02), b.points_m) < 0.08
                 assert close.sum() * 0.02 <= 0.2 + 1e-9, (seed, a.id, b.id)

@@ -7,7 +7,7 @@ built at run time (importlib.import_module) are not seen.
 One record per imported module: `from wallpose.pattern import CheckerPattern, choose_pattern` is one Import of
 wallpose.pattern with names ("CheckerPattern", "choose_pattern"); `from wallpose import limits`, where
 wallpose/limits.py exists, is an Import of wallpose.limits with no names. A check over modules (cycles) reads
-`target`; one over names (private names across modules) reads `names`.
+`target`; one over names (private names across modules, `private_imports`) reads `names`.
 """
 
 from __future__ import annotations
@@ -127,6 +127,32 @@ def layer_violations(imports: Iterable[Import], layers: Sequence[Collection[str]
         elif rank[dst] == rank[src] and (src, dst) not in allowed_siblings:
             problems.append(f"{imp.where()}: {imp.importer} imports {imp.target}, a sibling in the same layer "
                             f"that {src} may not import")
+    return problems
+
+
+def is_private(name: str) -> bool:
+    """One leading underscore, not a dunder (__version__, __all__ are public)."""
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def private_imports(imports: Iterable[Import], packages: Collection[str]) -> list[str]:
+    """One line per import of a private name from another module of the given packages: `from x import _y`,
+    or a private module (`from pkg import _mod`, `import pkg._mod`) from outside the package that holds it.
+    Imports from other projects (numpy, scipy) are theirs to judge."""
+    problems = []
+    for imp in imports:
+        if imp.target_package not in packages:
+            continue
+        names = [n for n in imp.names if is_private(n)]
+        parts = imp.target.split(".")
+        for k, part in enumerate(parts):
+            holder = ".".join(parts[:k])
+            if is_private(part) and not (imp.importer == holder or imp.importer.startswith(holder + ".")):
+                names.append(".".join(parts[:k + 1]))
+                break
+        if names:
+            problems.append(f"{imp.where()}: {imp.importer} imports private {', '.join(names)} from {imp.target}"
+                            " (make it public if it is shared, else keep it in its module)")
     return problems
 
 

@@ -37,7 +37,6 @@ from wallpose.plane import (
     plane_from_points,
     plane_in_frame,
     ransac_plane,
-    rotations,
     transfer_residuals_px,
 )
 from wallpose.rig import ViewRig
@@ -666,14 +665,6 @@ def test_ml_fit_jacobian_is_the_derivative_of_its_residuals() -> None:
 
 
 # --- small helpers of the module ----------------------------------------------------------------------------------
-
-def test_rotations_match_rodrigues() -> None:
-    rng = np.random.default_rng(9)
-    w = np.vstack([rng.normal(size=(20, 3)) * rng.uniform(1e-9, 3.0, (20, 1)), np.zeros((1, 3))])
-    expected = np.array([cv2.Rodrigues(v)[0] for v in w])
-    # entries of order 1 from a few dozen operations: ~100 eps
-    assert np.allclose(rotations(w), expected, rtol=0.0, atol=100 * EPS)
-
 
 def test_plane_in_frame_gives_the_walls_normal_and_distance() -> None:
     views = _views()

@@ -1,11 +1,11 @@
-"""The safety gate's decisions, stereo triangulation and laser scan matching against exact geometry."""
+"""The safety gate's decisions and laser scan matching against exact geometry (the triangulation of its check
+marks: tests/geometry/test_triangulation.py)."""
 
 import numpy as np
 import pytest
 
 from arproj.session import gate
 from arproj.session import tolerances as tol
-from geometry import Intrinsics, invert, look_at, make_pose, transform_points
 
 
 def _good(**changes):
@@ -38,22 +38,6 @@ def test_each_failure_closes_the_gate_and_says_why(changes, reason):
     d = gate.decide(_good(**changes))
     assert not d.show_map
     assert any(reason in r for r in d.reasons), d.reasons
-
-
-def test_triangulation_recovers_points_and_flags_a_wrong_rig():
-    left = Intrinsics.from_fov(1280, 800, 70.0, dist=(-0.1, 0.05, 0.0, 0.0, 0.0))
-    right = Intrinsics.from_fov(1280, 800, 69.0, dist=(-0.12, 0.06, 0.0, 0.0, 0.0))
-    T_right_from_left = invert(make_pose(None, [0.2, 0.0, 0.0]))
-    rng = np.random.default_rng(1)
-    points = np.column_stack([rng.uniform(-0.8, 0.8, 20), rng.uniform(-0.5, 0.5, 20), rng.uniform(2, 4, 20)])
-    uv_l = left.project(points)
-    uv_r = right.project(transform_points(T_right_from_left, points))
-    found, residual = gate.triangulate(left, right, T_right_from_left, uv_l, uv_r)
-    # exact pixels: only undistortion's iteration (to 1e-12) and float round-off remain
-    assert np.abs(found - points).max() < 1e-6 and residual.max() < 1e-6
-    wrong = invert(make_pose(look_at([0, 0, 0], [0.02, 0.01, 1.0], up=[0, -1, 0])[:3, :3], [0.2, 0.0, 0.0]))
-    _, residual_wrong = gate.triangulate(left, right, wrong, uv_l, uv_r)
-    assert np.sqrt(np.mean(residual_wrong ** 2)) > gate.STEREO_RESIDUAL_MAX_PX
 
 
 def _scan(position, yaw, rng, noise=0.01):
