@@ -217,7 +217,7 @@ def stage_scan(ctx: DemoContext) -> None:
 def stage_map(ctx: DemoContext) -> None:
     """Map from the scan log (stitched frames), every export, and the map's accuracy against the wall file."""
     from mapping.evaluate import evaluate, false_safe, fastener_recall
-    from mapping.export import export_all
+    from mapping.exports import export_all
     from mapping.pipeline import sample_positions
 
     data, result = ctx.map_data()
@@ -254,7 +254,7 @@ def stage_map(ctx: DemoContext) -> None:
 def stage_mesh(ctx: DemoContext) -> None:
     """Range images of the wall → merged surface mesh in the wall frame → textured wall.glb (and a view of it)."""
     from arproj.session.wallmap import load_wall_map
-    from mapping.export import write_wall_glb
+    from mapping.exports.glb import write_wall_glb
     from mapping.surface import wall_mesh_from_range_images
     from render import MeshRenderer
 

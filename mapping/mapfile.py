@@ -1,5 +1,5 @@
 """objects.json as its readers see it: the mapped objects with their evidence (measured or inferred), depth and
-uncertainty. `arproj map` writes it (mapping.export); the drill check, the projection session and the report
+uncertainty. `arproj map` writes it (mapping.exports); the drill check, the projection session and the report
 read it here, so there is one reader and its checks.
 
     {"format": "arproj-objects/2", "frame": "wall", "units": "m",

@@ -29,7 +29,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         """Build the in-wall map from a scan log: occupancy grids, stitched frames, classified objects, and
         the exports the projection session and CAD read."""
         from geometry.errors import InputError
-        from mapping import export
+        from mapping import exports
         from mapping.pipeline import MapSettings, build_map, load_scan
 
         if not resolution_mm > 0:
@@ -50,7 +50,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                 bar.update(task, description="meshing the range images")
                 views, T_world_from_wall = load_range_images(str(range_images))
                 mesh = wall_mesh_from_range_images(views, result.bounds, T_world_from_wall)
-            steps = export.export_steps(data, result, out, mesh, title=f"In-wall map of {log.name}",
+            steps = exports.export_steps(data, result, out, mesh, title=f"In-wall map of {log.name}",
                                         signal_y=signal_y)
             written = []
             for name, step in steps:
