@@ -41,7 +41,8 @@ from mapping import mapfile
 from mapping.evidence import FILE_NAME as COVERAGE_FILE
 from mapping.evidence import SAFETY_CHANNELS, regions
 from mapping.fusion import CLASSES, class_map
-from mapping.pipeline import MapResult, ScanData
+from mapping.pipeline import MapResult
+from mapping.scandata import ScanData
 from mapping.surface import flat_wall_mesh
 from mapping.texture import CLASS_COLOURS, bake_texture, textured_wall_mesh
 

@@ -10,19 +10,15 @@ FrameGraph.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from numpy.typing import NDArray
 
 from geometry.polyline import distances_to_polyline
 from mapping.grid import GridInfo, SensorModel, WallGrid
 from mapping.objects import MapObject, extract_lines, extract_points
+from mapping.scandata import ScanData
 from mapping.stitching import FrameGraph, apply_pose
 from scanner.sensor_model import additive_units
-
-if TYPE_CHECKING:
-    from mapping.pipeline import ScanData
 
 FEATURE_SIGMA_M = 0.002  # how well one feature is located within one frame
 

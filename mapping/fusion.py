@@ -35,15 +35,16 @@ from scipy import ndimage
 from scipy.special import expit
 
 from geometry.polyline import midpoint_samples
+from mapping.background import normalise
 from mapping.grid import GridInfo, WallGrid
-from mapping.objects import LINE_SIGMA_M, MapObject, normalise, ridge_width, smooth_derivatives
+from mapping.objects import LINE_SIGMA_M, MapObject, ridge_width, smooth_derivatives
 from scanner.sensor_model import additive_units, points_in_polygon
 
 CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "non_metal", "cavity", "fastener")
 METAL_CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "fastener")  # what the inductive sensor sees
 UNKNOWN = "unknown"  # no class is better supported than "nothing here"
 # Channels whose objects lower the level as well as raise it (cavities lower the capacitive one): their
-# background is estimated two-sided (mapping.objects.background_level)
+# background is estimated two-sided (mapping.background.background_level)
 TWO_SIDED_CHANNELS: tuple[str, ...] = ("capacitive",)
 
 

@@ -11,7 +11,6 @@ import itertools
 import sqlite3
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,6 +30,7 @@ from mapping.objects import (
     near_lines,
     points_on_lines,
 )
+from mapping.scandata import ScanData
 from mapping.stitching import FrameGraph, laser_constraints
 from scanner.log import DamagedLogError, ScanLog
 from scanner.sensor_model import ADDITIVE_SATURATED, additive_units
@@ -38,33 +38,6 @@ from scanner.sensor_model import ADDITIVE_SATURATED, additive_units
 STITCH_ROUNDS = 2  # feature pairing + alignment rounds (the second re-pairs and re-linearises)
 SPARSE_COVERAGE = 0.6  # below this fraction of the wall's cells observed, lines come from the passes' peaks
 CAP_TWO_SIDED = "capacitive" in TWO_SIDED_CHANNELS  # cavities lower the capacitive map: two-sided background
-
-
-@dataclass
-class ScanData:
-    """What a log holds, as arrays. samples: dict of (n,) arrays (scanner.log columns); frames likewise."""
-
-    source: str
-    samples: dict[str, NDArray]
-    frames: dict[str, NDArray]
-    meta: dict[str, Any]
-    warnings: list[str] = field(default_factory=list)
-
-    @property
-    def n_samples(self) -> int:
-        return int(self.samples["time_s"].shape[0]) if "time_s" in self.samples else 0
-
-    @classmethod
-    def from_scan(cls, source: str, samples: dict[str, NDArray], frame_rows: list[dict[str, Any]],
-                  meta: dict[str, Any]) -> ScanData:
-        """A scan held in memory (scanner.run.ScanResult's samples and frame rows) as the log would give it."""
-        frames: dict[str, NDArray] = {}
-        if frame_rows:
-            keys = sorted({k for r in frame_rows for k in r} - {"cov"})
-            frames = {k: np.asarray([r.get(k, np.nan) for r in frame_rows], dtype=np.float64) for k in keys}
-            frames["frame_id"] = frames["frame_id"].astype(np.int64)
-            frames["cov"] = np.asarray([r["cov"] for r in frame_rows], dtype=np.float64).reshape(-1, 3, 3)
-        return cls(source, samples, frames, {"status": "complete", **meta})
 
 
 def load_scan(path: str | Path) -> ScanData:

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from mapping.pipeline import ScanData
+from mapping.scandata import ScanData
 from scanner.laser import LASER_KEYS, simulate_fix
 from scanner.log import FORMAT, SAMPLE_COLUMNS, ScanLog
 from scanner.sensor_model import COUNTS_FULL_SCALE, SensorConfig

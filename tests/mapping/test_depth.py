@@ -19,7 +19,8 @@ from mapping.depth import AcModel, Footprint, estimate_depths, inductive_footpri
 from mapping.evaluate import depth_errors, truth_under
 from mapping.fusion import InductiveModel
 from mapping.objects import MapObject
-from mapping.pipeline import MapResult, ScanData, build_map, load_scan
+from mapping.pipeline import MapResult, build_map, load_scan
+from mapping.scandata import ScanData
 from mapping.simscan import simulate_scan
 from scanner.wall import Wall, WallObject, wall_from_dict
 

@@ -23,7 +23,7 @@ from mapping.frame_features import (
     frames_features,
 )
 from mapping.objects import MapObject
-from mapping.pipeline import ScanData
+from mapping.scandata import ScanData
 from mapping.simscan import simulate_scan
 from mapping.stitching import FrameGraph, apply_pose, seam_error
 from scanner.wall import Wall, wall_from_dict
