@@ -68,7 +68,7 @@ from geometry.robust import fit_line
 from mapping import tolerances as tol
 from mapping.fusion import InductiveModel
 from mapping.grid import WallGrid
-from mapping.objects import MapObject
+from mapping.map_object import MapObject
 from scanner.sensor_model import COUNTS_FULL_SCALE
 
 MIN_CROSSING_SIN = 0.3  # a pass at < 17° to a line sees a peak > 3.3x wider and is used as a strip instead

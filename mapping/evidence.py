@@ -35,8 +35,8 @@ from numpy.typing import ArrayLike, NDArray
 from geometry.errors import InputError
 from mapping import tolerances as tol
 from mapping.grid import GridInfo, WallGrid
+from mapping.map_object import MapObject
 from mapping.mapfile import MappedObject
-from mapping.objects import MapObject
 from scanner.sensor_model import additive_units
 
 FORMAT = "arproj-coverage/1"

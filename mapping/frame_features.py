@@ -15,7 +15,8 @@ from numpy.typing import NDArray
 
 from geometry.polyline import distances_to_polyline
 from mapping.grid import GridInfo, SensorModel, WallGrid
-from mapping.objects import MapObject, extract_lines, extract_points
+from mapping.map_object import MapObject
+from mapping.objects import extract_lines, extract_points
 from mapping.scandata import ScanData
 from mapping.stitching import FrameGraph, apply_pose
 from scanner.sensor_model import additive_units

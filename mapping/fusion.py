@@ -37,7 +37,8 @@ from scipy.special import expit
 from geometry.polyline import midpoint_samples
 from mapping.background import normalise
 from mapping.grid import GridInfo, WallGrid
-from mapping.objects import LINE_SIGMA_M, MapObject, ridge_width, smooth_derivatives
+from mapping.map_object import MapObject
+from mapping.objects import LINE_SIGMA_M, ridge_width, smooth_derivatives
 from scanner.sensor_model import additive_units, points_in_polygon
 
 CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "non_metal", "cavity", "fastener")

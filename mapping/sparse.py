@@ -22,7 +22,8 @@ from geometry.polyline import distances_to_polyline
 from geometry.robust import best_hypothesis, draw_samples, fit_line, refine
 from mapping import tolerances as tol
 from mapping.fusion import FusionParams, InductiveModel, raw_from_display
-from mapping.objects import MapObject, join_polylines
+from mapping.map_object import MapObject
+from mapping.objects import join_polylines
 from scanner.peaks import PeakConfig, detect_peaks, level_crossings
 from scanner.sensor_model import additive_units
 

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from mapping.fusion import CLASSES, Fuser, FusionParams, InductiveModel, class_map
 from mapping.grid import GridInfo, SensorModel, WallGrid
-from mapping.objects import MapObject
+from mapping.map_object import MapObject
 from mapping.pipeline import hysteresis_corrected
 from mapping.scandata import ScanData
 from mapping.simscan import simulate_scan
