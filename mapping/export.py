@@ -45,6 +45,7 @@ from mapping.pipeline import MapResult
 from mapping.scandata import ScanData
 from mapping.surface import flat_wall_mesh
 from mapping.texture import CLASS_COLOURS, bake_texture, textured_wall_mesh
+from scanner.channels import CHANNELS, INDUCTIVE, LINE_PEAKS
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -107,7 +108,7 @@ def write_map_png(result: MapResult, path: str | Path, title: str = "",
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
     fig, ax = plt.subplots(figsize=(10, max(3.0, 10 * aspect) + 0.8))
     grid = result.grid
-    layer = "inductive" if "inductive" in grid.models else grid.sensors[0]
+    layer = INDUCTIVE.name if INDUCTIVE.name in grid.models else grid.sensors[0]
     sig = grid.signal(layer)
     cmap = plt.get_cmap("Greys").with_extremes(bad=(1.0, 0.85, 0.85))  # unknown: pale red
     sig = np.where(_looked(result), sig, np.nan)  # only what both safety channels covered counts as looked at
@@ -165,7 +166,7 @@ def signals_along_line(data: ScanData, xy: NDArray[np.float64], y_m: float,
         order = np.argsort(xy[sel, 0])
         sel = sel[order]
         runs.append({"x": xy[sel, 0], "y": xy[sel, 1], "direction": s["direction"][sel].astype(np.float64),
-                     **{k: s[k][sel] for k in ("inductive", "ac", "capacitive") if k in s}})
+                     **{c.name: s[c.name][sel] for c in CHANNELS if c.name in s}})
     return runs
 
 
@@ -201,12 +202,13 @@ def write_signal_plot(data: ScanData, result: MapResult, path: str | Path, y_m: 
     if y_m is None:
         y_m = _busiest_height(result)
     runs = signals_along_line(data, result.sample_xy, y_m)
-    fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
-    for ax, key, label in ((axes[0], "inductive", "inductive sensor"), (axes[1], "ac", "AC sensor")):
+    fig, axes = plt.subplots(len(LINE_PEAKS), 1, figsize=(10, 5.5), sharex=True)
+    for ax, ch in zip(axes, LINE_PEAKS, strict=True):
+        key, label = ch.name, ch.label
         for run in runs:
             if key in run:
                 ax.plot(run["x"], run[key], lw=0.9, label=f"row at y ≈ {np.mean(run['y']):.3f} m")
-        ax.set_ylabel(f"{label}\n[display units]")
+        ax.set_ylabel(f"{label}\n[{ch.units}]")
         ax.grid(alpha=0.3)
         for o in result.objects:
             if o.kind == "line":

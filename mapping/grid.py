@@ -30,8 +30,9 @@ from scipy import ndimage
 from geometry.errors import InputError
 from mapping import tolerances as tol
 from mapping.background import background_level
+from scanner.channels import NAMES as CHANNEL_NAMES
 
-SENSORS: tuple[str, ...] = ("inductive", "capacitive", "ac")
+SENSORS: tuple[str, ...] = CHANNEL_NAMES
 _CHUNK = 500_000  # samples per vectorised batch (bounds memory to ~100 MB)
 
 

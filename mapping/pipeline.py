@@ -19,19 +19,20 @@ from geometry.errors import InputError
 from mapping import tolerances as tol
 from mapping.depth import AcModel, estimate_depths
 from mapping.evidence import Coverage, coverage_radii, mapped_objects, sample_noise
-from mapping.fusion import METAL_CLASSES, TWO_SIDED_CHANNELS, UNKNOWN, Fuser, FusionParams, InductiveModel
+from mapping.fusion import METAL_CLASSES, UNKNOWN, Fuser, FusionParams, InductiveModel
 from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid
 from mapping.map_object import MapObject
 from mapping.mapfile import MappedObject
 from mapping.objects import extract_lines, extract_points, extract_regions, near_lines, points_on_lines
 from mapping.scandata import ScanData
 from mapping.stitching import FrameGraph, laser_constraints
+from scanner.channels import AC, CAPACITIVE, INDUCTIVE
 from scanner.log import DamagedLogError, ScanLog
 from scanner.sensor_model import ADDITIVE_SATURATED, additive_units
 
 STITCH_ROUNDS = 2  # feature pairing + alignment rounds (the second re-pairs and re-linearises)
 SPARSE_COVERAGE = 0.6  # below this fraction of the wall's cells observed, lines come from the passes' peaks
-CAP_TWO_SIDED = "capacitive" in TWO_SIDED_CHANNELS  # cavities lower the capacitive map: two-sided background
+CAP_TWO_SIDED = CAPACITIVE.two_sided  # cavities lower the capacitive map: two-sided background
 
 
 def load_scan(path: str | Path) -> ScanData:
@@ -266,7 +267,7 @@ def build_map(data: ScanData, settings: MapSettings | None = None) -> MapResult:
     shift = float((data.meta.get("sensor") or {}).get("hysteresis_m", 0.0) or 0.0)
     looked: dict[str, NDArray[np.float64]] = {}
     for s in models:
-        pos = hysteresis_corrected(xy, data, shift) if s == "inductive" else xy
+        pos = hysteresis_corrected(xy, data, shift) if s == INDUCTIVE.name else xy
         grid.add_samples(pos, {s: readings[s]})
         looked[s] = pos[np.isfinite(readings[s]) & np.all(np.isfinite(pos), axis=1)]
     coverage = float(np.mean(grid.known(next(iter(models)))))
@@ -307,28 +308,28 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
     lines: list[MapObject] = []
     if sparse_data is not None and xy is not None:
         lines = lines_from_passes(sparse_data.samples, xy, lag_m, model, settings.fusion)
-    elif "ac" in grid.models:
+    elif AC.name in grid.models:
         # Live cables: sharp AC crests (their best-located view). Broad AC ridges are metal coupled to a
         # cable; the inductive map shows that metal better.
-        for obj in extract_lines(grid.signal("ac"), grid.info, sigma_m=ex.ac_line_sigma_m,
+        for obj in extract_lines(grid.signal(AC.name), grid.info, sigma_m=ex.ac_line_sigma_m,
                                  min_strength=ex.line_min_strength):
             fuser.classify(obj)
             if obj.cls == "power_line" and obj.features.get("ac_sharpness", 0.0) >= settings.fusion.ac_sharpness:
                 lines.append(obj)
-    if "inductive" in grid.models and sparse_data is None:
-        found = extract_lines(grid.signal("inductive"), grid.info, min_strength=ex.line_min_strength)
+    if INDUCTIVE.name in grid.models and sparse_data is None:
+        found = extract_lines(grid.signal(INDUCTIVE.name), grid.info, min_strength=ex.line_min_strength)
         crests = list(lines)
         for obj in found:
             lines += _without_duplicate_parts(obj, crests, ex.crest_radius_m, ex)
     points: list[MapObject] = []
     boxes: list[MapObject] = []  # peaks where lines end or meet: the box or junction they meet at
-    if "inductive" in grid.models:
+    if INDUCTIVE.name in grid.models:
         # in units where a screw on a pipe adds to the pipe (a saturated display would flatten it away)
-        points = extract_points(additive_units("inductive", grid.signal("inductive")), grid.info,
+        points = extract_points(additive_units(INDUCTIVE.name, grid.signal(INDUCTIVE.name)), grid.info,
                                 min_strength=ex.point_min_strength, saturated=ADDITIVE_SATURATED)
         points, boxes = points_on_lines(points, lines)
     non_metal: list[MapObject] = []
-    if "capacitive" in grid.models and "inductive" in grid.models and sparse_data is None:
+    if CAPACITIVE.name in grid.models and INDUCTIVE.name in grid.models and sparse_data is None:
         non_metal = _non_metal_lines(grid, fuser, lines, points, ex)
     regions: list[MapObject] = []
     near_metal_lines = np.zeros(grid.info.shape, bool)
@@ -339,13 +340,13 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
         explained |= near_lines([MapObject("line", np.repeat(p.points_m, 2, axis=0), 0.0) for p in points + boxes],
                                 grid.info, ex.point_clearance_m)
     metal_regions: list[MapObject] = []
-    if "inductive" in grid.models:  # metal areas: plates, steel studs
-        metal_regions = extract_regions(grid.signal("inductive"), grid.info, +1.0,
+    if INDUCTIVE.name in grid.models:  # metal areas: plates, steel studs
+        metal_regions = extract_regions(grid.signal(INDUCTIVE.name), grid.info, +1.0,
                                         min_strength=ex.metal_region_min_strength,
                                         min_width_m=ex.metal_region_min_width_m,
                                         min_area_m2=ex.metal_region_min_area_m2, exclude=explained)
-    if "capacitive" in grid.models:  # studs (raised) and cavities (lowered)
-        cap = grid.signal("capacitive")
+    if CAPACITIVE.name in grid.models:  # studs (raised) and cavities (lowered)
+        cap = grid.signal(CAPACITIVE.name)
         # Fasteners do not show capacitively (too small): only lines explain the capacitive map — metal ones
         # (their capacitive echo) and the non-metal ones found above
         by_lines = near_metal_lines.copy()
@@ -382,7 +383,7 @@ def _non_metal_lines(grid: WallGrid, fuser: Fuser, metal_lines: list[MapObject],
     classified (non_metal): water-filled plastic pipes, or studs whose fasteners are not in view (the
     capacitive channel cannot tell the two apart; only the shape differs). A straight ridge with fasteners
     on its centre line is a stud: it is left to the outlines (extract_regions)."""
-    found = extract_lines(grid.signal("capacitive"), grid.info, min_strength=ex.non_metal_line_min_strength,
+    found = extract_lines(grid.signal(CAPACITIVE.name), grid.info, min_strength=ex.non_metal_line_min_strength,
                           two_sided=CAP_TWO_SIDED)
     fasteners = np.array([p.points_m[0] for p in points]).reshape(-1, 2)
     out = []
