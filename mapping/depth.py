@@ -68,7 +68,8 @@ from geometry.robust import fit_line
 from mapping import tolerances as tol
 from mapping.fusion import InductiveModel
 from mapping.grid import WallGrid
-from mapping.objects import MapObject
+from mapping.map_object import MapObject
+from scanner.channels import AC, INDUCTIVE
 from scanner.sensor_model import COUNTS_FULL_SCALE
 
 MIN_CROSSING_SIN = 0.3  # a pass at < 17° to a line sees a peak > 3.3x wider and is used as a strip instead
@@ -924,20 +925,20 @@ def estimate_depths(objects: list[MapObject], grid: WallGrid, samples: dict[str,
     term) record what the estimate rests on.
     """
     ac = ac or AcModel()
-    fps = {"inductive": inductive_footprint(model), "ac": ac_footprint(ac)}
+    fps = {INDUCTIVE.name: inductive_footprint(model), AC.name: ac_footprint(ac)}
     xy = np.asarray(xy, dtype=np.float64)
     order = _pass_order(samples, xy)
-    passes = {"inductive": _PassSet(_passes(samples, xy, "inductive", lag_m, order)),
-              "ac": _PassSet(_passes(samples, xy, "ac", 0.0, order))}
+    passes = {INDUCTIVE.name: _PassSet(_passes(samples, xy, INDUCTIVE.name, lag_m, order)),
+              AC.name: _PassSet(_passes(samples, xy, AC.name, 0.0, order))}
     outlines = [o.points_m for o in objects if o.kind == "outline" and o.features.get("polarity", 1.0) > 0
                 and o.cls == "metal"]
     wanted = [o for o in objects if o.kind in ("line", "point")]
-    for channel in ("ac", "inductive"):
+    for channel in (AC.name, INDUCTIVE.name):
         fp = fps[channel]
         # every mapped line and point is a possible neighbour in a fit, measured or not
         targets = [_Target(o, o.depth_m if o.depth_m is not None else _initial_guess(o, fp)) for o in wanted]
         pending = [k for k, o in enumerate(wanted)
-                   if o.depth_m is None and (channel == "inductive" or _ac_first(o))]
+                   if o.depth_m is None and (channel == INDUCTIVE.name or _ac_first(o))]
         done: dict[int, tuple[float, float, float, int]] = {}
         for round_ in range(ROUNDS):
             passes[channel].reset()  # the depth guesses moved: so did the peaks they put on each pass
@@ -961,7 +962,7 @@ def estimate_depths(objects: list[MapObject], grid: WallGrid, samples: dict[str,
             obj.depth_m, obj.depth_sigma_m = d, sigma
             obj.features["depth_measurements"] = float(n)
             obj.features["depth_sigma_stat_m"] = sigma_stat
-            obj.features["depth_channel_ac"] = 1.0 if channel == "ac" else 0.0
+            obj.features["depth_channel_ac"] = 1.0 if channel == AC.name else 0.0
 
 
 def _measure(k: int, targets: list[_Target], passes: _PassSet, fp: Footprint,

@@ -20,8 +20,8 @@ from numpy.typing import NDArray
 
 from geometry.polyline import densify, distances_to_polyline, polyline_length
 from mapping.evidence import Coverage
+from mapping.map_object import MapObject
 from mapping.mapfile import MappedObject
-from mapping.objects import MapObject
 from scanner.wall import Wall, WallObject
 
 MATCH_M = 0.015

@@ -35,21 +35,22 @@ from numpy.typing import ArrayLike, NDArray
 from geometry.errors import InputError
 from mapping import tolerances as tol
 from mapping.grid import GridInfo, WallGrid
+from mapping.map_object import MapObject
 from mapping.mapfile import MappedObject
-from mapping.objects import MapObject
+from scanner.channels import AC, CAPACITIVE, CHANNELS, INDUCTIVE, SAFETY, by_name
+from scanner.channels import NAMES as CHANNEL_NAMES
 from scanner.sensor_model import additive_units
 
 FORMAT = "arproj-coverage/1"
 FILE_NAME = "coverage.npz"
-SAFETY_CHANNELS = ("inductive", "capacitive")  # between them every object that matters shows
+SAFETY_CHANNELS = SAFETY  # between them every object that matters shows
 # What a channel can tell, for messages: a point it did not cover may hide these.
-CHANNEL_SEES = {"inductive": "metal (pipes, cables, screws, plates)",
-                "capacitive": "water-filled plastic pipes, wood and cavities",
-                "ac": "live cables"}
-# 0.6 of the footprint σ at the surface (scanner.sensor_model.SensorConfig: inductive σu 11 mm, capacitive
-# twice the inductive, AC 4 mm): an object in a covered cell gives ≥ exp(−0.18) = 83 % of its peak.
+CHANNEL_SEES = {c.name: c.sees for c in CHANNELS}
+# 0.6 of the footprint σ at the surface (scanner.channels, from scanner.sensor_model.SensorConfig: inductive
+# σu 11 mm, capacitive twice the inductive, AC 4 mm): an object in a covered cell gives ≥ exp(−0.18) = 83 % of
+# its peak.
 COVERAGE_RADIUS_SIGMAS = 0.6
-DEFAULT_COVERAGE_RADIUS_M = {"inductive": 0.6 * 0.011, "capacitive": 0.6 * 0.022, "ac": 0.6 * 0.004}
+DEFAULT_COVERAGE_RADIUS_M = {c.name: COVERAGE_RADIUS_SIGMAS * c.footprint_sigma_m for c in CHANNELS}
 _DEDUPE_M = 0.0005  # sample positions are merged on this raster before the nearest-sample search
 _PAIRS_PER_CHUNK = 1 << 20  # nearest-sample search: (raster column, cell row) pairs handled at a time
 
@@ -60,11 +61,11 @@ def coverage_radii(sensor_meta: dict | None) -> dict[str, float]:
     radii = dict(DEFAULT_COVERAGE_RADIUS_M)
     su = meta.get("ind_sigma_u_m")
     if isinstance(su, (int, float)) and su > 0:
-        radii["inductive"] = COVERAGE_RADIUS_SIGMAS * float(su)
-        radii["capacitive"] = COVERAGE_RADIUS_SIGMAS * 2.0 * float(su)  # capacitive footprint: twice the inductive
+        radii[INDUCTIVE.name] = COVERAGE_RADIUS_SIGMAS * float(su)
+        radii[CAPACITIVE.name] = COVERAGE_RADIUS_SIGMAS * 2.0 * float(su)  # capacitive footprint: twice the inductive
     ac = meta.get("ac_sigma_m")
     if isinstance(ac, (int, float)) and ac > 0:
-        radii["ac"] = COVERAGE_RADIUS_SIGMAS * float(ac)
+        radii[AC.name] = COVERAGE_RADIUS_SIGMAS * float(ac)
     return radii
 
 
@@ -161,18 +162,16 @@ MODEL_SLACK = 0.2  # ... plus this share of the objects' predicted signal (the m
 _NNLS_MAX_ITER = 2000  # a few hundred columns at most: Lawson–Hanson needs far fewer steps
 _MIN_BACKGROUND_CELLS = 50  # fewer cells beyond every object's reach cannot fix the empty wall's level
 _FIT_STRIDE = 2  # the fit uses every 2nd cell each way (the signal is smooth over 4 mm cells)
-# What each channel responds to (scanner/sensor_model.py): screws and nails are too small to show
-# capacitively, and only live cables and metal coupled to them show in AC.
-_CHANNEL_SEES_CLASS = {"inductive": ("power_line", "metal_pipe", "metal", "fastener"),
-                       "ac": ("power_line", "metal_pipe", "metal"),
-                       "capacitive": ("power_line", "metal_pipe", "metal", "non_metal", "cavity")}
+# What each channel responds to (scanner.channels: screws and nails are too small to show capacitively, and
+# only live cables and metal coupled to them show in AC).
+_CHANNEL_SEES_CLASS = {c.name: c.responds_to for c in CHANNELS}
 
 
 def _footprint_sigma(channel: str, cls: str, depth_m: float) -> float:
     inductive = float(np.hypot(_IND_SIGMA_M, _IND_SPREAD * depth_m))
-    if channel == "capacitive":
+    if channel == CAPACITIVE.name:
         return 2.0 * inductive
-    if channel == "ac":
+    if channel == AC.name:
         return float(np.hypot(_AC_SIGMA_M, _AC_SPREAD * depth_m)) if cls == "power_line" else 1.5 * inductive
     return inductive
 
@@ -297,7 +296,7 @@ def unexplained_cells(grid: WallGrid, sensor: str, objects: list[MapObject], cov
         if ci.size == 0 or ri.size == 0:
             continue
         d = _distance_field(obj, xs[ci], ys[ri])
-        sign = -1.0 if (sensor == "capacitive" and obj.cls == "cavity") else 1.0
+        sign = -1.0 if (sensor == CAPACITIVE.name and obj.cls == "cavity") else 1.0
         # the cell centres are sorted: ri and ci are ranges
         blocks.append(_Block(slice(int(ri[0]), int(ri[-1]) + 1), slice(int(ci[0]), int(ci[-1]) + 1),
                              np.stack([sign * np.exp(-0.5 * (d / (base * scale)) ** 2)
@@ -315,7 +314,7 @@ def unexplained_cells(grid: WallGrid, sensor: str, objects: list[MapObject], cov
     level: float | None = None
     if far.sum() >= _MIN_BACKGROUND_CELLS:
         level = float(np.median(y[far]))
-    elif sensor != "capacitive" and np.isfinite(noise_sigma):
+    elif sensor != CAPACITIVE.name and np.isfinite(noise_sigma):
         # objects only add to these channels: the empty wall is the low end (its 10th percentile lies
         # 1.28 σ below its level), as long as a tenth of the cells are empty
         level = float(np.percentile(y[known], 10)) + 1.2816 * noise_sigma
@@ -345,7 +344,7 @@ def unexplained_cells(grid: WallGrid, sensor: str, objects: list[MapObject], cov
         spread = noise_sigma if np.isfinite(noise_sigma) and noise_sigma > 0 else \
             1.4826 * float(np.median(np.abs(residual[known] - np.median(residual[known]))))
         limit = UNEXPLAINED_SIGMAS * max(spread, 1e-9) + MODEL_SLACK * np.abs(predicted)
-        excess = np.abs(residual) if sensor == "capacitive" else residual
+        excess = np.abs(residual) if by_name(sensor).two_sided else residual
         out = known & (excess > limit)
         fit_mask &= ~out  # what is left unexplained must not pull the next fit towards it
     return out
@@ -377,7 +376,7 @@ class Coverage:
         radii = radii or DEFAULT_COVERAGE_RADIUS_M
         noise = noise or {}
         covered, response = {}, {}
-        radius = {c: radii.get(c, DEFAULT_COVERAGE_RADIUS_M["inductive"]) for c in grid.sensors}
+        radius = {c: radii.get(c, DEFAULT_COVERAGE_RADIUS_M[INDUCTIVE.name]) for c in grid.sensors}
         positions = {c: sample_xy.get(c, np.zeros((0, 2))) for c in grid.sensors}
         distance: dict[str, NDArray[np.float64]] = {}
         for sensor in grid.sensors:
@@ -395,7 +394,7 @@ class Coverage:
         return cls(grid.info, covered, response, bounds)
 
     @classmethod
-    def complete(cls, info: GridInfo, channels: tuple[str, ...] = ("inductive", "capacitive", "ac"),
+    def complete(cls, info: GridInfo, channels: tuple[str, ...] = CHANNEL_NAMES,
                  bounds: tuple[float, float, float, float] | None = None) -> Coverage:
         """Everything looked at, no response: the simulation's truth (a wall file), never a scan."""
         return cls(info, {c: np.ones(info.shape, bool) for c in channels},
@@ -523,9 +522,9 @@ def regions(mask: NDArray[np.bool_], info: GridInfo, simplify_m: float = 0.003) 
     return out
 
 
-# Channels that see each class: a stretch one of them covered was measured (scanner/sensor_model.py).
-CLASS_CHANNELS = {"power_line": ("inductive", "ac"), "metal_pipe": ("inductive",), "metal": ("inductive",),
-                  "fastener": ("inductive",), "non_metal": ("capacitive",), "cavity": ("capacitive",)}
+# Channels that see each class: a stretch one of them covered was measured (scanner.channels `measures`).
+CLASS_CHANNELS = {cls: tuple(c.name for c in CHANNELS if cls in c.measures)
+                  for cls in dict.fromkeys(cls for c in CHANNELS for cls in c.measures)}
 _STRETCH_STEP_M = 0.002  # lines are cut where their evidence changes, to this resolution
 
 
@@ -565,7 +564,7 @@ def mapped_objects(objects: list[MapObject], coverage: Coverage | None, sigma_m:
     by the coverage of the channels that see its class (without coverage: all measured)."""
     out = []
     for o in objects:
-        channels = CLASS_CHANNELS.get(o.cls, ("inductive",))
+        channels = CLASS_CHANNELS.get(o.cls, (INDUCTIVE.name,))
 
         def measured_at(p: NDArray[np.float64], channels: tuple[str, ...] = channels) -> NDArray[np.bool_]:
             if coverage is None:

@@ -10,19 +10,17 @@ FrameGraph.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from numpy.typing import NDArray
 
 from geometry.polyline import distances_to_polyline
 from mapping.grid import GridInfo, SensorModel, WallGrid
-from mapping.objects import MapObject, extract_lines, extract_points
+from mapping.map_object import MapObject
+from mapping.objects import extract_lines, extract_points
+from mapping.scandata import ScanData
 from mapping.stitching import FrameGraph, apply_pose
+from scanner.channels import INDUCTIVE
 from scanner.sensor_model import additive_units
-
-if TYPE_CHECKING:
-    from mapping.pipeline import ScanData
 
 FEATURE_SIGMA_M = 0.002  # how well one feature is located within one frame
 
@@ -36,11 +34,11 @@ def frame_features(uv: NDArray[np.float64], inductive: NDArray[np.float64],
     uv, a = uv[ok], inductive[ok]
     lo, hi = uv.min(axis=0) - 0.01, uv.max(axis=0) + 0.01
     info = GridInfo.covering(lo[0], lo[1], hi[0], hi[1], resolution)
-    grid = WallGrid(info, {"inductive": SensorModel.from_readings("inductive", a)})
-    grid.add_samples(uv, {"inductive": a})
-    sig = grid.signal("inductive")
+    grid = WallGrid(info, {INDUCTIVE.name: SensorModel.from_readings(INDUCTIVE.name, a)})
+    grid.add_samples(uv, {INDUCTIVE.name: a})
+    sig = grid.signal(INDUCTIVE.name)
     lines = extract_lines(sig, info)
-    points = [p for p in extract_points(additive_units("inductive", sig), info, min_strength=8.0)
+    points = [p for p in extract_points(additive_units(INDUCTIVE.name, sig), info, min_strength=8.0)
               if all(distances_to_polyline(p.points_m[0], ln.points_m)[0] > 0.02 for ln in lines)]
     return points, lines
 
@@ -53,7 +51,7 @@ def frames_features(data: ScanData) -> tuple[list[FrameFeatures], list]:
     s = data.samples
     per_frame: list[FrameFeatures] = []
     boxes: list = []
-    if "inductive" not in s or "drive_u_m" not in s:
+    if INDUCTIVE.name not in s or "drive_u_m" not in s:
         return [([], []) for _ in data.frames["frame_id"]], [None for _ in data.frames["frame_id"]]
     for fid in data.frames["frame_id"]:
         sel = s["frame_id"] == fid
@@ -62,7 +60,7 @@ def frames_features(data: ScanData) -> tuple[list[FrameFeatures], list]:
             per_frame.append(([], []))
             boxes.append(None)
             continue
-        per_frame.append(frame_features(uv, s["inductive"][sel]))
+        per_frame.append(frame_features(uv, s[INDUCTIVE.name][sel]))
         boxes.append((np.nanmin(uv, axis=0), np.nanmax(uv, axis=0)))
     return per_frame, boxes
 

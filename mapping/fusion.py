@@ -35,16 +35,19 @@ from scipy import ndimage
 from scipy.special import expit
 
 from geometry.polyline import midpoint_samples
+from mapping.background import normalise
 from mapping.grid import GridInfo, WallGrid
-from mapping.objects import LINE_SIGMA_M, MapObject, normalise, ridge_width, smooth_derivatives
+from mapping.map_object import MapObject
+from mapping.objects import LINE_SIGMA_M, ridge_width, smooth_derivatives
+from scanner.channels import AC, CAPACITIVE, INDUCTIVE, TWO_SIDED
 from scanner.sensor_model import additive_units, points_in_polygon
 
 CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "non_metal", "cavity", "fastener")
 METAL_CLASSES: tuple[str, ...] = ("power_line", "metal_pipe", "metal", "fastener")  # what the inductive sensor sees
 UNKNOWN = "unknown"  # no class is better supported than "nothing here"
 # Channels whose objects lower the level as well as raise it (cavities lower the capacitive one): their
-# background is estimated two-sided (mapping.objects.background_level)
-TWO_SIDED_CHANNELS: tuple[str, ...] = ("capacitive",)
+# background is estimated two-sided (mapping.background.background_level)
+TWO_SIDED_CHANNELS: tuple[str, ...] = TWO_SIDED
 
 
 @dataclass(frozen=True)
@@ -153,15 +156,15 @@ class Fuser:
         pts, normals = midpoint_samples(obj.points_m, 0.005) if obj.kind == "line" else (obj.points_m, None)
         for s, z in self.z.items():
             f[f"{s}_z"] = float(np.median(_sample(z, info, pts)))
-        if "ac" in self.z and normals is not None:
-            on = _sample(self.z["ac"], info, pts)
-            side = 0.5 * (_sample(self.z["ac"], info, pts + p.side_offset_m * normals)
-                          + _sample(self.z["ac"], info, pts - p.side_offset_m * normals))
+        if AC.name in self.z and normals is not None:
+            on = _sample(self.z[AC.name], info, pts)
+            side = 0.5 * (_sample(self.z[AC.name], info, pts + p.side_offset_m * normals)
+                          + _sample(self.z[AC.name], info, pts - p.side_offset_m * normals))
             f["ac_sharpness"] = float(np.median((on - side) / np.maximum(np.abs(on), 1.0)))
-        if "inductive" in self.signal and obj.kind == "line":
-            sig = np.nan_to_num(self.signal["inductive"], nan=self.background["inductive"])
+        if INDUCTIVE.name in self.signal and obj.kind == "line":
+            sig = np.nan_to_num(self.signal[INDUCTIVE.name], nan=self.background[INDUCTIVE.name])
             peak = float(np.median(_sample(sig, info, pts)))
-            amp = float(raw_from_display(peak) - raw_from_display(self.background["inductive"]))
+            amp = float(raw_from_display(peak) - raw_from_display(self.background[INDUCTIVE.name]))
             seg = np.diff(obj.points_m, axis=0)
             main = seg[int(np.argmax(np.linalg.norm(seg, axis=1)))]
             # the width in units where the footprint adds up: a shallow pipe's saturated display top widens
@@ -178,7 +181,7 @@ class Fuser:
         """Median half-maximum width (m) of the inductive ridge across a line's points (normals: unit, across),
         measured as the line detector measures it (ridge_width) on the map in additive units."""
         if self._ridge is None:
-            raw = additive_units("inductive", self.signal["inductive"])
+            raw = additive_units(INDUCTIVE.name, self.signal[INDUCTIVE.name])
             z, _, _ = normalise(raw)
             sigma_px = LINE_SIGMA_M / self.grid.info.resolution
             s, _gx, _gy, hxx, hxy, hyy, _w = smooth_derivatives(z, np.isfinite(raw), sigma_px)
@@ -215,7 +218,7 @@ class Fuser:
         f = self.features(obj)
         obj.features.update(f)
         s = p.softness
-        looked_for_metal = "inductive" in self.z
+        looked_for_metal = INDUCTIVE.name in self.z
         ind = f.get("inductive_z", 0.0)
         metal = float(_sigmoid((ind - p.metal_min_z) / (s * p.metal_min_z))) if looked_for_metal else 0.0
         cap = f.get("capacitive_z", 0.0)
@@ -271,7 +274,7 @@ def class_map(grid: WallGrid, threshold: float = 0.7) -> tuple[NDArray[np.int16]
     shape = grid.info.shape
     idx = np.full(shape, -1, np.int16)
     prob = np.zeros(shape)
-    order = [("capacitive", "non_metal"), ("inductive", "metal"), ("ac", "power_line")]  # later wins
+    order = [(CAPACITIVE.name, "non_metal"), (INDUCTIVE.name, "metal"), (AC.name, "power_line")]  # later wins
     for sensor, cls in order:
         if sensor not in grid.models:
             continue

@@ -29,8 +29,10 @@ from scipy import ndimage
 
 from geometry.errors import InputError
 from mapping import tolerances as tol
+from mapping.background import background_level
+from scanner.channels import NAMES as CHANNEL_NAMES
 
-SENSORS: tuple[str, ...] = ("inductive", "capacitive", "ac")
+SENSORS: tuple[str, ...] = CHANNEL_NAMES
 _CHUNK = 500_000  # samples per vectorised batch (bounds memory to ~100 MB)
 
 
@@ -133,10 +135,8 @@ class SensorModel:
         """Thresholds from the readings themselves: background level plus multiples of its noise.
 
         Needs no knowledge of the scanner's units; the background is estimated from the lower quantiles
-        (objects.background_level), which stay background even where objects cover much of the wall.
+        (mapping.background.background_level), which stay background even where objects cover much of the wall.
         """
-        from mapping.objects import background_level
-
         a = np.asarray(readings, dtype=np.float64)
         a = a[np.isfinite(a)]
         if a.size == 0:

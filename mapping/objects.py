@@ -12,7 +12,7 @@ Everything is in wall coordinates, metres: `Polyline.points_m` (k, 2).
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,33 +24,11 @@ from scipy.spatial import cKDTree
 from geometry.polyline import distances_to_polyline, polyline_length
 from geometry.robust import fit_line
 from mapping import tolerances as tol
+from mapping.background import normalise
 from mapping.grid import GridInfo
+from mapping.map_object import MapObject
 
 BRANCH_OFFSET_M = 0.008  # ridge points farther than this from a chain's main path form a branch of their own
-
-
-@dataclass
-class MapObject:
-    """One extracted object. kind: 'line' | 'point' | 'outline'. cls: class name (fusion fills it)."""
-
-    kind: str
-    points_m: NDArray[np.float64]  # (k, 2) wall metres; one point for 'point', closed ring for 'outline'
-    width_m: float
-    strength: float = 0.0  # ridge/blob height over background, in robust standard deviations
-    cls: str = "unknown"
-    confidence: float = 0.0
-    features: dict[str, float] = field(default_factory=dict)
-    # Depth of the object behind the surface and its 1σ, metres (mapping.depth); None where no channel tells.
-    depth_m: float | None = None
-    depth_sigma_m: float | None = None
-
-    def length_m(self) -> float:
-        return polyline_length(self.points_m)
-
-    def to_json(self) -> dict:
-        return {"class": self.cls, "kind": self.kind,
-                "points_m": [[round(float(x), 5), round(float(y), 5)] for x, y in self.points_m],
-                "width_m": round(float(self.width_m), 4), "confidence": round(float(self.confidence), 3)}
 
 
 @dataclass(frozen=True)
@@ -63,57 +41,6 @@ class RidgePoints:
     strength: NDArray[np.float64]
     width: NDArray[np.float64]
     pixel: NDArray[np.int64]  # (n, 2) (row, col) of the cell each point came from
-
-
-CLIP_SIGMAS = 3.0  # two-sided background: values this many σ from the level are objects
-TWO_SIDED_RATIO = 2.0  # ... and the mode's spread replaces the lower quantiles' when this much narrower
-_CLIP_ROUNDS = 10
-
-
-def background_level(values: NDArray[np.float64], two_sided: bool = False) -> tuple[float, float]:
-    """(level, σ) of the empty-wall background among finite values, robust even when objects cover most of
-    the area: from the lower quantiles only (for Gaussian noise q25 − q05 = 0.971 σ, median = q25 + 0.674 σ).
-    Valid while at least a quarter of the cells are background.
-
-    two_sided: objects may also lower the level (the capacitive map: cavities), so the lowest values need not
-    be background. The mode is then estimated too — median and interquartile range of the values within
-    CLIP_SIGMAS of the level, iterated from the median (valid while most cells are background) — and taken
-    where the lower quantiles are at least TWO_SIDED_RATIO times as wide: lowered objects in them. Otherwise
-    the one-sided estimate stands (it holds with objects over up to three quarters of the wall)."""
-    v = np.asarray(values, dtype=np.float64)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return 0.0, 1.0
-    q05, q25, q99 = np.percentile(v, [5, 25, 99.9])
-    floor = max(1e-9, 1e-3 * float(q99 - q05))
-    sigma = max((q25 - q05) / 0.971, floor)
-    level = float(q25 + 0.674 * sigma)
-    if not two_sided:
-        return level, float(sigma)
-    mode = float(np.median(v))
-    spread = max(1.4826 * float(np.median(np.abs(v - mode))), floor)
-    for _ in range(_CLIP_ROUNDS):
-        near = v[np.abs(v - mode) <= CLIP_SIGMAS * spread]
-        if near.size < 10:
-            break
-        lo, mid, hi = np.percentile(near, [25, 50, 75])
-        new_mode, new_spread = float(mid), max(float(hi - lo) / 1.349, floor)
-        if abs(new_mode - mode) <= 1e-3 * spread and abs(new_spread - spread) <= 1e-3 * spread:
-            mode, spread = new_mode, new_spread
-            break
-        mode, spread = new_mode, new_spread
-    return (mode, spread) if TWO_SIDED_RATIO * spread < sigma else (level, float(sigma))
-
-
-def normalise(signal: NDArray[np.float64], two_sided: bool = False) -> tuple[NDArray[np.float64], float, float]:
-    """(z-scores with NaN→0, background level, background σ) of a signal map with NaN unknown (two_sided: see
-    background_level)."""
-    known = np.isfinite(signal)
-    if not known.any():
-        return np.zeros(signal.shape), 0.0, 1.0
-    level, sigma = background_level(signal[known], two_sided)
-    z = np.where(known, (signal - level) / sigma, 0.0)
-    return z, level, sigma
 
 
 def smooth_derivatives(z: NDArray[np.float64], known: NDArray[np.bool_], sigma_px: float

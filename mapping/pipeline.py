@@ -11,7 +11,6 @@ import itertools
 import sqlite3
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,51 +19,20 @@ from geometry.errors import InputError
 from mapping import tolerances as tol
 from mapping.depth import AcModel, estimate_depths
 from mapping.evidence import Coverage, coverage_radii, mapped_objects, sample_noise
-from mapping.fusion import METAL_CLASSES, TWO_SIDED_CHANNELS, UNKNOWN, Fuser, FusionParams, InductiveModel
+from mapping.fusion import METAL_CLASSES, UNKNOWN, Fuser, FusionParams, InductiveModel
 from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid
+from mapping.map_object import MapObject
 from mapping.mapfile import MappedObject
-from mapping.objects import (
-    MapObject,
-    extract_lines,
-    extract_points,
-    extract_regions,
-    near_lines,
-    points_on_lines,
-)
+from mapping.objects import extract_lines, extract_points, extract_regions, near_lines, points_on_lines
+from mapping.scandata import ScanData
 from mapping.stitching import FrameGraph, laser_constraints
+from scanner.channels import AC, CAPACITIVE, INDUCTIVE
 from scanner.log import DamagedLogError, ScanLog
 from scanner.sensor_model import ADDITIVE_SATURATED, additive_units
 
 STITCH_ROUNDS = 2  # feature pairing + alignment rounds (the second re-pairs and re-linearises)
 SPARSE_COVERAGE = 0.6  # below this fraction of the wall's cells observed, lines come from the passes' peaks
-CAP_TWO_SIDED = "capacitive" in TWO_SIDED_CHANNELS  # cavities lower the capacitive map: two-sided background
-
-
-@dataclass
-class ScanData:
-    """What a log holds, as arrays. samples: dict of (n,) arrays (scanner.log columns); frames likewise."""
-
-    source: str
-    samples: dict[str, NDArray]
-    frames: dict[str, NDArray]
-    meta: dict[str, Any]
-    warnings: list[str] = field(default_factory=list)
-
-    @property
-    def n_samples(self) -> int:
-        return int(self.samples["time_s"].shape[0]) if "time_s" in self.samples else 0
-
-    @classmethod
-    def from_scan(cls, source: str, samples: dict[str, NDArray], frame_rows: list[dict[str, Any]],
-                  meta: dict[str, Any]) -> ScanData:
-        """A scan held in memory (scanner.run.ScanResult's samples and frame rows) as the log would give it."""
-        frames: dict[str, NDArray] = {}
-        if frame_rows:
-            keys = sorted({k for r in frame_rows for k in r} - {"cov"})
-            frames = {k: np.asarray([r.get(k, np.nan) for r in frame_rows], dtype=np.float64) for k in keys}
-            frames["frame_id"] = frames["frame_id"].astype(np.int64)
-            frames["cov"] = np.asarray([r["cov"] for r in frame_rows], dtype=np.float64).reshape(-1, 3, 3)
-        return cls(source, samples, frames, {"status": "complete", **meta})
+CAP_TWO_SIDED = CAPACITIVE.two_sided  # cavities lower the capacitive map: two-sided background
 
 
 def load_scan(path: str | Path) -> ScanData:
@@ -135,11 +103,42 @@ class MapResult:
 
 
 @dataclass(frozen=True)
+class ExtractionParams:
+    """Thresholds of extract_objects (heights in robust σ over the background, lengths in metres)."""
+
+    line_min_strength: float = 6.0  # ridge height of an inductive or AC line
+    point_min_strength: float = 8.0  # peak height of a fastener (inductive, additive units)
+    ac_line_sigma_m: float = 0.004  # smoothing of the AC line detector: crests are sharp, and best located so
+    # Around each metal line this much is explained (its footprint and capacitive echo): max(floor, factor · width)
+    line_clearance_m: float = 0.04
+    line_clearance_widths: float = 1.5
+    point_clearance_m: float = 0.04  # ... around each fastener and box
+    # Metal areas (plates, steel studs) on the inductive map, beside the lines and points
+    metal_region_min_strength: float = 10.0
+    metal_region_min_width_m: float = 0.04
+    metal_region_min_area_m2: float = 0.003
+    metal_region_clearance_m: float = 0.02  # the capacitive map is explained this far around a metal area
+    # Studs (raised) and cavities (lowered) on the capacitive map
+    capacitive_region_min_strength: float = 8.0
+    capacitive_region_min_area_m2: float = 0.006
+    non_metal_clearance_m: float = 0.04  # a non-metal line explains max(this, its width) around it
+    non_metal_line_min_strength: float = 8.0  # capacitive ridge height for a non-metal line, as for its regions
+    non_metal_line_max_width_m: float = 0.12  # wider ridges are areas: a line's capacitive footprint at 5 cm < 10 cm
+    echo_radius_m: float = 0.02  # a capacitive ridge this close along a metal line is that line's capacitive echo
+    crest_radius_m: float = 0.015  # an inductive line this close along an AC crest is the same cable
+    duplicate_share: float = 0.7  # ... when more than this share of a segment lies that close (sampled every
+    duplicate_step_m: float = 0.01  # ... this far along it)
+    stud_fasteners: int = 2  # this many fasteners on a non-metal ridge's centre line: a stud the board is fixed to
+    stud_max_bend_widths: float = 0.25  # a stud is straight: its chord departs less than this share of its width
+    stud_on_line_widths: float = 0.25  # fasteners within max(this share of the width, stud_on_line_m) of its centre
+    stud_on_line_m: float = 0.01
+
+
+@dataclass(frozen=True)
 class MapSettings:
     resolution_m: float = tol.DEFAULT_RESOLUTION_M
     stitch: bool = True
-    line_min_strength: float = 6.0
-    point_min_strength: float = 8.0
+    extraction: ExtractionParams = field(default_factory=ExtractionParams)
     fusion: FusionParams = field(default_factory=FusionParams)
 
 
@@ -268,7 +267,7 @@ def build_map(data: ScanData, settings: MapSettings | None = None) -> MapResult:
     shift = float((data.meta.get("sensor") or {}).get("hysteresis_m", 0.0) or 0.0)
     looked: dict[str, NDArray[np.float64]] = {}
     for s in models:
-        pos = hysteresis_corrected(xy, data, shift) if s == "inductive" else xy
+        pos = hysteresis_corrected(xy, data, shift) if s == INDUCTIVE.name else xy
         grid.add_samples(pos, {s: readings[s]})
         looked[s] = pos[np.isfinite(readings[s]) & np.all(np.isfinite(pos), axis=1)]
     coverage = float(np.mean(grid.known(next(iter(models)))))
@@ -303,57 +302,64 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
     from mapping.sparse import lines_from_passes
 
     settings = settings or MapSettings()
+    ex = settings.extraction
     model = InductiveModel.from_meta(sensor_meta)
     fuser = Fuser(grid, settings.fusion, model)
     lines: list[MapObject] = []
     if sparse_data is not None and xy is not None:
         lines = lines_from_passes(sparse_data.samples, xy, lag_m, model, settings.fusion)
-    elif "ac" in grid.models:
+    elif AC.name in grid.models:
         # Live cables: sharp AC crests (their best-located view). Broad AC ridges are metal coupled to a
         # cable; the inductive map shows that metal better.
-        for obj in extract_lines(grid.signal("ac"), grid.info, sigma_m=0.004, min_strength=settings.line_min_strength):
+        for obj in extract_lines(grid.signal(AC.name), grid.info, sigma_m=ex.ac_line_sigma_m,
+                                 min_strength=ex.line_min_strength):
             fuser.classify(obj)
             if obj.cls == "power_line" and obj.features.get("ac_sharpness", 0.0) >= settings.fusion.ac_sharpness:
                 lines.append(obj)
-    if "inductive" in grid.models and sparse_data is None:
-        found = extract_lines(grid.signal("inductive"), grid.info, min_strength=settings.line_min_strength)
+    if INDUCTIVE.name in grid.models and sparse_data is None:
+        found = extract_lines(grid.signal(INDUCTIVE.name), grid.info, min_strength=ex.line_min_strength)
         crests = list(lines)
         for obj in found:
-            lines += _without_duplicate_parts(obj, crests)
+            lines += _without_duplicate_parts(obj, crests, ex.crest_radius_m, ex)
     points: list[MapObject] = []
     boxes: list[MapObject] = []  # peaks where lines end or meet: the box or junction they meet at
-    if "inductive" in grid.models:
+    if INDUCTIVE.name in grid.models:
         # in units where a screw on a pipe adds to the pipe (a saturated display would flatten it away)
-        points = extract_points(additive_units("inductive", grid.signal("inductive")), grid.info,
-                                min_strength=settings.point_min_strength, saturated=ADDITIVE_SATURATED)
+        points = extract_points(additive_units(INDUCTIVE.name, grid.signal(INDUCTIVE.name)), grid.info,
+                                min_strength=ex.point_min_strength, saturated=ADDITIVE_SATURATED)
         points, boxes = points_on_lines(points, lines)
     non_metal: list[MapObject] = []
-    if "capacitive" in grid.models and "inductive" in grid.models and sparse_data is None:
-        non_metal = _non_metal_lines(grid, fuser, lines, points)
+    if CAPACITIVE.name in grid.models and INDUCTIVE.name in grid.models and sparse_data is None:
+        non_metal = _non_metal_lines(grid, fuser, lines, points, ex)
     regions: list[MapObject] = []
     near_metal_lines = np.zeros(grid.info.shape, bool)
     for ln in lines:
-        near_metal_lines |= near_lines([ln], grid.info, max(0.04, 1.5 * ln.width_m))
+        near_metal_lines |= near_lines([ln], grid.info, max(ex.line_clearance_m, ex.line_clearance_widths * ln.width_m))
     explained = near_metal_lines.copy()
     if points or boxes:
         explained |= near_lines([MapObject("line", np.repeat(p.points_m, 2, axis=0), 0.0) for p in points + boxes],
-                                grid.info, 0.04)
+                                grid.info, ex.point_clearance_m)
     metal_regions: list[MapObject] = []
-    if "inductive" in grid.models:  # metal areas: plates, steel studs
-        metal_regions = extract_regions(grid.signal("inductive"), grid.info, +1.0, min_strength=10.0,
-                                        min_width_m=0.04, min_area_m2=0.003, exclude=explained)
-    if "capacitive" in grid.models:  # studs (raised) and cavities (lowered)
-        cap = grid.signal("capacitive")
+    if INDUCTIVE.name in grid.models:  # metal areas: plates, steel studs
+        metal_regions = extract_regions(grid.signal(INDUCTIVE.name), grid.info, +1.0,
+                                        min_strength=ex.metal_region_min_strength,
+                                        min_width_m=ex.metal_region_min_width_m,
+                                        min_area_m2=ex.metal_region_min_area_m2, exclude=explained)
+    if CAPACITIVE.name in grid.models:  # studs (raised) and cavities (lowered)
+        cap = grid.signal(CAPACITIVE.name)
         # Fasteners do not show capacitively (too small): only lines explain the capacitive map — metal ones
         # (their capacitive echo) and the non-metal ones found above
         by_lines = near_metal_lines.copy()
         for ln in non_metal:
-            by_lines |= near_lines([ln], grid.info, max(0.04, ln.width_m))
-        metal = near_lines(metal_regions, grid.info, 0.02) if metal_regions else np.zeros(grid.info.shape, bool)
-        regions += extract_regions(cap, grid.info, +1.0, min_strength=8.0, min_area_m2=0.006,
-                                   exclude=by_lines | metal, two_sided=CAP_TWO_SIDED)
-        regions += extract_regions(cap, grid.info, -1.0, min_strength=8.0, min_area_m2=0.006,
-                                   exclude=near_metal_lines, two_sided=CAP_TWO_SIDED)
+            by_lines |= near_lines([ln], grid.info, max(ex.non_metal_clearance_m, ln.width_m))
+        metal = (near_lines(metal_regions, grid.info, ex.metal_region_clearance_m) if metal_regions
+                 else np.zeros(grid.info.shape, bool))
+        regions += extract_regions(cap, grid.info, +1.0, min_strength=ex.capacitive_region_min_strength,
+                                   min_area_m2=ex.capacitive_region_min_area_m2, exclude=by_lines | metal,
+                                   two_sided=CAP_TWO_SIDED)
+        regions += extract_regions(cap, grid.info, -1.0, min_strength=ex.capacitive_region_min_strength,
+                                   min_area_m2=ex.capacitive_region_min_area_m2, exclude=near_metal_lines,
+                                   two_sided=CAP_TWO_SIDED)
     if sparse_data is not None:
         # the grid is too patchy for areas; the passes' lines are classified already
         metal_found = lines + [_metal_named(fuser.classify(o)) for o in points] + [_box(fuser, o) for o in boxes]
@@ -368,52 +374,49 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
     return metal_found + non_metal + capacitive
 
 
-NON_METAL_LINE_MIN_STRENGTH = 8.0  # capacitive ridge height (robust σ) for a non-metal line, as for its regions
-NON_METAL_LINE_MAX_WIDTH_M = 0.12  # wider ridges are areas: a line's capacitive footprint at 5 cm is < 10 cm
-DUPLICATE_RADIUS_M = 0.02  # a capacitive ridge this close along a metal line is that line's capacitive echo
 NAMED_BY_CHANNEL = "metal_by_channel"  # feature flag: the class is the finding channel's, fusion could not tell
-STUD_FASTENERS = 2  # this many fasteners on a non-metal ridge's centre line: a stud the board is fixed to
 
 
 def _non_metal_lines(grid: WallGrid, fuser: Fuser, metal_lines: list[MapObject],
-                     points: list[MapObject]) -> list[MapObject]:
+                     points: list[MapObject], ex: ExtractionParams) -> list[MapObject]:
     """Raised capacitive ridges that no metal line explains and where the inductive channel finds no metal,
     classified (non_metal): water-filled plastic pipes, or studs whose fasteners are not in view (the
     capacitive channel cannot tell the two apart; only the shape differs). A straight ridge with fasteners
     on its centre line is a stud: it is left to the outlines (extract_regions)."""
-    found = extract_lines(grid.signal("capacitive"), grid.info, min_strength=NON_METAL_LINE_MIN_STRENGTH,
+    found = extract_lines(grid.signal(CAPACITIVE.name), grid.info, min_strength=ex.non_metal_line_min_strength,
                           two_sided=CAP_TWO_SIDED)
     fasteners = np.array([p.points_m[0] for p in points]).reshape(-1, 2)
     out = []
     for ridge in found:
-        if ridge.width_m > NON_METAL_LINE_MAX_WIDTH_M:
+        if ridge.width_m > ex.non_metal_line_max_width_m:
             continue
-        for piece in _without_duplicate_parts(ridge, metal_lines, DUPLICATE_RADIUS_M):
+        for piece in _without_duplicate_parts(ridge, metal_lines, ex.echo_radius_m, ex):
             fuser.classify(piece)
             if piece.cls != "non_metal":
                 continue  # metal's capacitive echo (the inductive map names it), or too weak to name
-            if _is_stud(piece, fasteners):
+            if _is_stud(piece, fasteners, ex):
                 continue
             out.append(piece)
     return out
 
 
-def _is_stud(line: MapObject, fasteners: NDArray[np.float64]) -> bool:
-    """A straight non-metal ridge with STUD_FASTENERS or more fasteners on its centre line (within a quarter
-    of its width): the boards' screws or nails, driven into a stud."""
+def _is_stud(line: MapObject, fasteners: NDArray[np.float64], ex: ExtractionParams) -> bool:
+    """A straight non-metal ridge with ex.stud_fasteners or more fasteners on its centre line (within a
+    quarter of its width): the boards' screws or nails, driven into a stud."""
     from geometry.polyline import distances_to_polyline
 
     p = line.points_m
     chord = p[-1] - p[0]
     length = float(np.linalg.norm(chord))
-    if len(fasteners) < STUD_FASTENERS or length < 1e-9:
+    if len(fasteners) < ex.stud_fasteners or length < 1e-9:
         return False
     rel = p - p[0]
     bend = float(np.max(np.abs(chord[0] * rel[:, 1] - chord[1] * rel[:, 0])) / length)
-    if bend > 0.25 * line.width_m:
+    if bend > ex.stud_max_bend_widths * line.width_m:
         return False  # bent: a pipe, never a stud
-    on_line = distances_to_polyline(fasteners, p[[0, -1]]) <= max(0.25 * line.width_m, 0.01)
-    return int(on_line.sum()) >= STUD_FASTENERS
+    reach = max(ex.stud_on_line_widths * line.width_m, ex.stud_on_line_m)
+    on_line = distances_to_polyline(fasteners, p[[0, -1]]) <= reach
+    return int(on_line.sum()) >= ex.stud_fasteners
 
 
 def _metal_named(obj: MapObject) -> MapObject:
@@ -452,10 +455,11 @@ def _as_outline(obj: MapObject) -> MapObject:
     return MapObject("outline", ring, obj.width_m, obj.strength, obj.cls, obj.confidence, obj.features)
 
 
-def _without_duplicate_parts(obj: MapObject, kept: list[MapObject], radius_m: float = 0.015) -> list[MapObject]:
+def _without_duplicate_parts(obj: MapObject, kept: list[MapObject], radius_m: float,
+                             ex: ExtractionParams) -> list[MapObject]:
     """obj minus the segments that lie along lines already kept (a cable seen by both the AC and the
-    inductive sensor); what remains, split where segments were removed. A segment is a duplicate when 70 %
-    of it lies within radius_m of a kept line."""
+    inductive sensor); what remains, split where segments were removed. A segment is a duplicate when
+    ex.duplicate_share of it lies within radius_m of a kept line."""
     from geometry.polyline import distances_to_polyline, midpoint_samples
 
     if not kept:
@@ -463,9 +467,9 @@ def _without_duplicate_parts(obj: MapObject, kept: list[MapObject], radius_m: fl
     p = obj.points_m
     dup = []
     for a, b in itertools.pairwise(p):
-        pts, _ = midpoint_samples(np.array([a, b]), 0.01)
+        pts, _ = midpoint_samples(np.array([a, b]), ex.duplicate_step_m)
         d = np.min([distances_to_polyline(pts, k.points_m) for k in kept], axis=0)
-        dup.append(bool((d < radius_m).mean() > 0.7))
+        dup.append(bool((d < radius_m).mean() > ex.duplicate_share))
     if not any(dup):
         return [obj]
     out, run = [], [p[0]]

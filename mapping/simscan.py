@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from mapping.pipeline import ScanData
+from mapping.scandata import ScanData
+from scanner.channels import CHANNELS
 from scanner.laser import LASER_KEYS, simulate_fix
 from scanner.log import FORMAT, SAMPLE_COLUMNS, ScanLog
 from scanner.sensor_model import COUNTS_FULL_SCALE, SensorConfig
@@ -89,7 +90,7 @@ def simulate_scan(wall: Wall, seed: int = 0, line_spacing_m: float = 0.01, sampl
                       "cmd_x_m": cmd[0] + uv[:, 0], "cmd_y_m": cmd[1] + uv[:, 1],
                       "x_m": xy_est[:, 0], "y_m": xy_est[:, 1], "true_x_m": xy_true[:, 0],
                       "true_y_m": xy_true[:, 1], "axis": np.full(n, axis), "direction": np.full(n, direction),
-                      "inductive": counts[:, 0], "capacitive": counts[:, 1], "ac": counts[:, 2]}
+                      **{c.name: counts[:, c.index] for c in CHANNELS}}
             for key, arr in values.items():
                 cols[key].append(np.asarray(arr))
             pass_id += 1

@@ -22,7 +22,9 @@ from geometry.polyline import distances_to_polyline
 from geometry.robust import best_hypothesis, draw_samples, fit_line, refine
 from mapping import tolerances as tol
 from mapping.fusion import FusionParams, InductiveModel, raw_from_display
-from mapping.objects import MapObject, join_polylines
+from mapping.map_object import MapObject
+from mapping.objects import join_polylines
+from scanner.channels import AC, INDUCTIVE
 from scanner.peaks import PeakConfig, detect_peaks, level_crossings
 from scanner.sensor_model import additive_units
 
@@ -167,7 +169,7 @@ def _height_width(along: NDArray[np.float64], v: NDArray[np.float64], position: 
     lo, hi = max(0, k - 3), min(len(v), k + 4)
     top = float(np.median(np.sort(v[lo:hi])[-3:]))  # robust to one noisy sample
     height = top - base
-    if channel == "inductive":
+    if channel == INDUCTIVE.name:
         v = additive_units(channel, v)
         top, base = (float(x) for x in additive_units(channel, np.array([top, base])))
     crossings = level_crossings(along, v, k, base + 0.5 * (top - base))
@@ -308,7 +310,7 @@ EXTEND_REACH_M = 0.30  # a run is extended along a following pass at most this f
 
 def _extended_along(poly: NDArray[np.float64], heights: NDArray[np.float64], baseline: float,
                     xy: NDArray[np.float64], values: NDArray[np.float64], axis: NDArray,
-                    channel: str = "inductive") -> NDArray[np.float64]:
+                    channel: str = INDUCTIVE.name) -> NDArray[np.float64]:
     """The run lengthened at each end as far as a following pass (axis 2) measured it on: bins of ALONG_BIN_M
     beyond the end crossing, within ALONG_LATERAL_M of its line, each covered, at least half the run's
     weakest crossing (heights: display units over the background) and at most twice its strongest (additive
@@ -343,17 +345,17 @@ def lines_from_passes(samples: dict[str, NDArray], xy: NDArray[np.float64], lag_
                       inductive: InductiveModel, params: FusionParams) -> list[MapObject]:
     """Classified line objects from the passes of a (sparse) scan."""
     objects: list[MapObject] = []
-    if "ac" in samples:
-        ac = pass_peaks(samples, xy, "ac", 0.0, min_height=0.03)
+    if AC.name in samples:
+        ac = pass_peaks(samples, xy, AC.name, 0.0, min_height=0.03)
         crest = ac.width < AC_CREST_MAX_WIDTH_M
         ac_crests = PassPeaks(ac.xy[crest], ac.height[crest], ac.width[crest], ac.axis[crest], ac.pass_id[crest],
                               ac.baseline)
-        objects += _build(ac_crests, "ac", inductive, params)
-    if "inductive" in samples:
-        ind = pass_peaks(samples, xy, "inductive", lag_m, min_height=0.04)
+        objects += _build(ac_crests, AC.name, inductive, params)
+    if INDUCTIVE.name in samples:
+        ind = pass_peaks(samples, xy, INDUCTIVE.name, lag_m, min_height=0.04)
         kept = list(objects)
-        along = (xy, samples["inductive"], samples["axis"])
-        for obj in _build(ind, "inductive", inductive, params, along):
+        along = (xy, samples[INDUCTIVE.name], samples["axis"])
+        for obj in _build(ind, INDUCTIVE.name, inductive, params, along):
             pts = np.vstack([obj.points_m[0] + t * (obj.points_m[-1] - obj.points_m[0])
                              for t in np.linspace(0, 1, 11)])
             if kept and np.min([distances_to_polyline(pts, k.points_m) for k in kept], axis=0).mean() < 0.015:
@@ -391,8 +393,8 @@ def _build(peaks: PassPeaks, channel: str, model: InductiveModel, params: Fusion
     for poly, width, height in zip(joined, widths, strengths, strict=True):
         obj = MapObject("line", poly, width, height)
         obj.features = {"length_m": obj.length_m(), "width_m": width, f"{channel}_peak": height,
-                        "source": 1.0 if channel == "ac" else 0.0}
-        if channel == "ac":
+                        "source": 1.0 if channel == AC.name else 0.0}
+        if channel == AC.name:
             obj.cls, obj.confidence = "power_line", float(expit((height - 0.05) / 0.01))
         else:
             _classify_inductive(obj, peaks.baseline, model, params)

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from scanner.channels import LINE_PEAKS
 from scanner.log import ScanLog
 from scanner.sensor_model import SensorModel
 from scanner.wall import Wall, load_wall, shipped_walls, wall_from_dict
@@ -34,8 +35,9 @@ def plot_log(log_path: str | Path, out_path: str | Path, max_points: int = 400_0
         samples, meta = log.samples(), log.meta
     wall = wall_from_dict(meta["wall_json"], str(log_path)) if meta.get("wall_json") else None
     step = max(1, len(samples["seq"]) // max_points)
-    fig, axes = plt.subplots(1, 2, figsize=(14, 6.5), constrained_layout=True)
-    for ax, channel, cmap in zip(axes, ("inductive", "ac"), ("viridis", "magma"), strict=True):
+    fig, axes = plt.subplots(1, len(LINE_PEAKS), figsize=(14, 6.5), constrained_layout=True)
+    for ax, ch in zip(axes, LINE_PEAKS, strict=True):
+        channel, cmap = ch.name, ch.cmap
         order = np.argsort(samples[channel][::step])  # strong readings on top
         x, y, v = (samples[k][::step][order] for k in ("x_m", "y_m", channel))
         points = ax.scatter(x, y, c=v, s=1.5, cmap=cmap, vmin=0, vmax=1, linewidths=0)

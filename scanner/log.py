@@ -72,6 +72,7 @@ from typing import Any
 import numpy as np
 
 from geometry.errors import InputError
+from scanner.channels import NAMES as CHANNEL_NAMES
 from scanner.laser import LASER_KEYS
 
 FORMAT = "arproj-scanlog/2"
@@ -79,7 +80,7 @@ READABLE_FORMATS = frozenset({"arproj-scanlog/1", FORMAT})  # version 1: frames 
 
 SAMPLE_COLUMNS: tuple[str, ...] = (
     "seq", "time_s", "frame_id", "pass_id", "drive_u_m", "drive_v_m", "cmd_x_m", "cmd_y_m", "x_m", "y_m",
-    "true_x_m", "true_y_m", "axis", "direction", "inductive", "capacitive", "ac",
+    "true_x_m", "true_y_m", "axis", "direction", *CHANNEL_NAMES,
 )
 INT_SAMPLE_COLUMNS = frozenset({"seq", "frame_id", "pass_id", "axis", "direction"})
 FRAME_COLUMNS: tuple[str, ...] = (

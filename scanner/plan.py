@@ -34,6 +34,7 @@ import numpy as np
 from geometry.errors import InputError
 from geometry.polyline import distances_to_polyline, nearest_segments
 from geometry.robust import fit_line
+from scanner.channels import CAPACITIVE, INDUCTIVE, LINE_PEAKS
 from scanner.peaks import PeakConfig, detect_peaks
 from scanner.priors import SOCKET_NEAR_M, Priors, wall_priors
 from scanner.sensor_model import additive_units
@@ -414,8 +415,8 @@ class AdaptivePlanner:
         coord, inductive_lag = self._along(samples, axis)
         seams = self._seam_ends(coord, axis)
         found = []
-        for channel in ("inductive", "ac"):
-            lag = inductive_lag if channel == "inductive" else 0.0
+        for channel in (c.name for c in LINE_PEAKS):
+            lag = inductive_lag if channel == INDUCTIVE.name else 0.0
             for peak in detect_peaks(coord, samples[channel], self.peaks, keep_cut=seams):
                 found.append((peak.position - lag, peak.height, peak.width, channel))
         found.sort()
@@ -592,7 +593,7 @@ class AdaptivePlanner:
             t = (uv - a) @ d
             # a coarse pass across the course through a bump crosses it already (one along it does not)
             across, fixed = ("x", 1) if abs(d[1]) >= abs(d[0]) else ("y", 0)
-            for peak in detect_peaks(t, additive_units("inductive", samples["inductive"]), rise):
+            for peak in detect_peaks(t, additive_units(INDUCTIVE.name, samples[INDUCTIVE.name]), rise):
                 m = a + peak.position * d
                 on_coarse = any(c.axis == across and abs(c.start_uv[fixed] - m[fixed]) < 0.01 for c in coarse)
                 if on_coarse or any(float(np.linalg.norm(m - q)) < 0.02 for q in seen):
@@ -627,7 +628,7 @@ class AdaptivePlanner:
                 # an inductive course's square runs each side on past its corners by a crossing's half length:
                 # one leaving near a corner is crossed clear of the pass's end (a deep pipe's peak is 4 cm
                 # wide; a live cable's AC crest, about 2 cm, is clear of it already)
-                half = r + (cfg.cross_half_m if tr.chain.channel == "inductive" else 0.0)
+                half = r + (cfg.cross_half_m if tr.chain.channel == INDUCTIVE.name else 0.0)
                 sides = [self._short(frame, "trace", "x", head[1] - r, head[0], half),
                          self._short(frame, "trace", "y", head[0] + r, head[1], half),
                          self._short(frame, "trace", "x", head[1] + r, head[0], half),
@@ -743,7 +744,7 @@ class AdaptivePlanner:
             samples = by_spec[spec]
             coord, lag = self._along(samples, spec.axis)
             fixed = spec.start_uv[1] if spec.axis == "x" else spec.start_uv[0]
-            for peak in detect_peaks(coord, samples["inductive"], weak_cfg):
+            for peak in detect_peaks(coord, samples[INDUCTIVE.name], weak_cfg):
                 if peak.height >= self.peaks.min_height:
                     continue  # a find the tracing took
                 pos = peak.position - lag
@@ -770,7 +771,7 @@ class AdaptivePlanner:
                 continue
             samples = by_spec[spec]
             metal = [pos for pos, _, _ in self._find_channels(samples, "x")]
-            for peak in detect_peaks(samples["drive_u_m"], samples["capacitive"], wide):
+            for peak in detect_peaks(samples["drive_u_m"], samples[CAPACITIVE.name], wide):
                 if peak.width >= cfg.stud_min_width_m and all(abs(peak.position - m) > 0.03 for m in metal):
                     found.append((peak.position, spec.start_uv[1]))
         found.sort()
@@ -802,7 +803,7 @@ class AdaptivePlanner:
         """(2) confirming, (3) tracing and (4) following; see AdaptivePlanner and STOPPING_RULE."""
         cfg = self.config
         base = {c: float(np.percentile(np.concatenate([by_spec[p][c] for p in coarse]), 20))
-                for c in ("inductive", "ac")}
+                for c in (ch.name for ch in LINE_PEAKS)}
         chains: list[_Chain] = []
         tracks: list[_Track] = []
         known: list[tuple[np.ndarray, float, str]] = []  # the coarse passes' crossings, in drive coordinates

@@ -21,6 +21,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from geometry.errors import InputError
+from scanner.channels import CHANNELS
 from scanner.laser import LaserConfig
 from scanner.log import ScanLog
 from scanner.plan import (
@@ -222,7 +223,7 @@ def _measure(backend: Backend, pass_id: int, spec: PassSpec, report: FrameReport
     bad = (counts < 0) | (counts > COUNTS_FULL_SCALE)
     if bad.any():
         i, ch = np.argwhere(bad)[0]
-        name = ("inductive", "capacitive", "ac")[ch]
+        name = CHANNELS[ch].name
         raise InputError(f"scanner reported {name} = {int(counts[i, ch])} counts (sample {i} of pass {pass_id}), "
                          f"outside 0..{COUNTS_FULL_SCALE}", "check the scanner (sensor fault?) and resume")
     n = len(t_rel)

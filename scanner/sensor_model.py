@@ -32,6 +32,7 @@ import numpy as np
 from scipy.special import erf
 
 from geometry.polyline import densify, distances_to_polyline
+from scanner.channels import AC, CAPACITIVE, INDUCTIVE, by_name
 from scanner.wall import AREA_KINDS, Wall, WallObject
 
 COUNTS_FULL_SCALE = 1000  # device counts for display value 1.0
@@ -149,15 +150,16 @@ def points_in_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return inside
 
 
+_IND, _CAP, _AC = INDUCTIVE.index, CAPACITIVE.index, AC.index  # columns of the simulated readings
 DISPLAY_CLIP = 0.999  # display values above this are saturated: their raw value is unknown
 ADDITIVE_SATURATED = -math.log1p(-DISPLAY_CLIP)  # 6.9: what additive_units gives a saturated reading
 
 
 def additive_units(sensor: str, values: np.ndarray) -> np.ndarray:
     """Readings in units where objects add up: the inductive and AC display's soft saturation 1 − exp(−raw)
-    (SensorModel.display) undone; capacitive is linear. A saturated top (display 1) stays flat at
-    ADDITIVE_SATURATED."""
-    if sensor == "capacitive":
+    (SensorModel.display) undone; a linear channel (capacitive) is already additive. A saturated top (display 1)
+    stays flat at ADDITIVE_SATURATED."""
+    if not by_name(sensor).saturating:
         return values
     return -np.log1p(-np.clip(values, 0.0, DISPLAY_CLIP))
 
@@ -166,7 +168,7 @@ def additive_units(sensor: str, values: np.ndarray) -> np.ndarray:
 class _Term:
     """One object's contribution to one sensor channel."""
 
-    channel: int  # 0 inductive, 1 capacitive, 2 ac
+    channel: int  # its index in scanner.channels.CHANNELS
     shape: str  # line | area | point
     geometry: np.ndarray
     strength: float
@@ -211,31 +213,31 @@ class SensorModel:
             coupling = math.exp(-gap / cfg.ac_coupling_length_m)
         if obj.kind == "pipe":
             size = (obj.diameter_m or 0.015) / 0.015
-            self._term(0, "line", obj, _IND_LINE[obj.material or "copper"] * size, su, sv, True)
+            self._term(_IND, "line", obj, _IND_LINE[obj.material or "copper"] * size, su, sv, True)
             water = 0.15 if obj.water_filled else 0.0
             material_cap = 0.08 if obj.is_metal else 0.03
-            self._term(1, "line", obj, (water + material_cap) * size, 2 * su, 2 * sv, False, power=1.5)
-            self._term(2, "line", obj, cfg.ac_coupled_pipe_level * coupling * size, 1.5 * su, 1.5 * sv, False,
+            self._term(_CAP, "line", obj, (water + material_cap) * size, 2 * su, 2 * sv, False, power=1.5)
+            self._term(_AC, "line", obj, cfg.ac_coupled_pipe_level * coupling * size, 1.5 * su, 1.5 * sv, False,
                        power=1.0)
         elif obj.kind == "cable":
-            self._term(0, "line", obj, _IND_CABLE, su, sv, True)
-            self._term(1, "line", obj, 0.05, 2 * su, 2 * sv, False, power=1.5)
+            self._term(_IND, "line", obj, _IND_CABLE, su, sv, True)
+            self._term(_CAP, "line", obj, 0.05, 2 * su, 2 * sv, False, power=1.5)
             if obj.live:
-                self._term(2, "line", obj, cfg.ac_strength, cfg.ac_sigma_m, cfg.ac_sigma_m, False, power=1.5,
+                self._term(_AC, "line", obj, cfg.ac_strength, cfg.ac_sigma_m, cfg.ac_sigma_m, False, power=1.5,
                            spread=cfg.ac_spread_per_depth)
         elif obj.kind in ("screw", "nail"):
             size = ((obj.diameter_m or 0.004) / 0.004) ** 2 * ((obj.length_m or 0.04) / 0.04)
-            self._term(0, "point", obj, _IND_POINT * size, su, sv, True)
+            self._term(_IND, "point", obj, _IND_POINT * size, su, sv, True)
         elif obj.kind in AREA_KINDS:
             if obj.kind == "cavity":
-                self._term(1, "area", obj, -0.15, 2 * su, 2 * sv, False, power=1.0)
+                self._term(_CAP, "area", obj, -0.15, 2 * su, 2 * sv, False, power=1.0)
                 return
             thickness = (obj.thickness_m or 0.002) / 0.002 if obj.kind == "plate" else 0.6
-            self._term(0, "area", obj, _IND_AREA[obj.material or "wood"] * min(thickness, 2.0), su, sv, True)
+            self._term(_IND, "area", obj, _IND_AREA[obj.material or "wood"] * min(thickness, 2.0), su, sv, True)
             cap = 0.30 if obj.material == "wood" else 0.12
-            self._term(1, "area", obj, cap, 2 * su, 2 * sv, False, power=1.0)
+            self._term(_CAP, "area", obj, cap, 2 * su, 2 * sv, False, power=1.0)
             if obj.is_metal:
-                self._term(2, "area", obj, cfg.ac_coupled_plate_level * coupling, 1.5 * su, 1.5 * sv, False,
+                self._term(_AC, "area", obj, cfg.ac_coupled_plate_level * coupling, 1.5 * su, 1.5 * sv, False,
                            power=1.0)
 
     # ------------------------------------------------------------------ evaluation

@@ -3,7 +3,9 @@
 Layers, lowest first: geometry ← {scanner, calibration, wallpose, render, devices} ← mapping ← arproj. shaders is
 data (any package may load it; it imports none). A package imports from its own layer only along the sibling
 pairs listed below, which must stay acyclic. No module takes a private name (`_name`) from another module of
-the product. More checks over the same graph (module cycles) go beside these, reading tests.support.import_graph.
+the product. No two modules import each other, directly
+or around a loop, also lazily or under TYPE_CHECKING. More checks over the same graph go beside these, reading
+tests.support.import_graph.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from tests.support.import_graph import (
     Import,
     find_cycle,
     layer_violations,
+    module_edges,
     package_edges,
     private_imports,
     product_imports,
@@ -83,6 +86,12 @@ def test_the_allowed_sibling_imports_exist_and_are_acyclic(imports: list[Import]
 def test_no_private_name_is_imported_across_modules(imports: list[Import]) -> None:
     problems = private_imports(imports, PACKAGES)
     assert not problems, "\n".join(problems)
+
+
+def test_no_import_cycle_between_modules(imports: list[Import]) -> None:
+    cycle = find_cycle(module_edges(imports))
+    assert cycle is None, "modules import each other: " + " → ".join(cycle or []) + (
+        " (move what they share into a module below both)")
 
 
 # ---- the checker itself, on small made-up modules ------------------------------------------------------------
@@ -163,3 +172,23 @@ def test_private_check_flags_a_made_up_import(source: str, importer: str, compla
 ])
 def test_private_check_passes_a_made_up_import(source: str, importer: str) -> None:
     assert private_imports(read_imports(source, importer, FAKE), PACKAGES) == []
+
+
+def test_cycle_check_flags_a_made_up_loop_through_a_lazy_and_a_guarded_import() -> None:
+    sources = {
+        "mapping.grid": "from mapping.background import background_level\n",
+        "mapping.objects": "from mapping.grid import GridInfo\n",
+        "mapping.background": "def f():\n    from mapping.objects import MapObject\n",   # lazy: still a loop
+        "mapping.pipeline": "from mapping.objects import MapObject\n",
+        "mapping.frame_features": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+                                  "    from mapping.pipeline import ScanData\n",
+    }
+    found = [i for module, source in sources.items() for i in read_imports(source, module, FAKE)]
+    assert find_cycle(module_edges(found)) == ["mapping.background", "mapping.objects", "mapping.grid",
+                                               "mapping.background"]
+    # the loop broken, a guarded import back up is one too
+    without = [i for i in found if i.importer != "mapping.background"]
+    assert find_cycle(module_edges(without)) is None
+    back = read_imports("from mapping.frame_features import frame_features\n", "mapping.pipeline", FAKE)
+    assert find_cycle(module_edges(without + back)) == ["mapping.frame_features", "mapping.pipeline",
+                                                        "mapping.frame_features"]

@@ -11,6 +11,7 @@ import numpy as np
 
 from arproj.bench import BenchTable, cells, column, columns
 from arproj.console import track
+from scanner.channels import LINE_PEAKS
 
 SEAM_MODES = ("features", "laser", "laser+features", "assumed laser", "assumed laser+features")
 SEAM_NOISE = (0.020, 0.010, np.radians(1.0))  # frame pose noise the issue asks for: x, y, phi
@@ -36,7 +37,7 @@ def _peaks_peer(data, wall) -> list[float]:
         xy = np.column_stack([s["x_m"][a:b], s["y_m"][a:b]])
         along = xy[:, 0] if s["axis"][a] == 0 else xy[:, 1]
         order = np.argsort(along)
-        for channel in ("inductive", "ac"):
+        for channel in (c.name for c in LINE_PEAKS):
             for p in detect_peaks(along[order], s[channel][a:b][order], PeakConfig()):
                 k = int(np.argmin(np.abs(along[order] - p.position)))
                 point = xy[order][k].copy()

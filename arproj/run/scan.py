@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from geometry.errors import InputError
-from mapping.pipeline import MapResult, ScanData, build_map
+from mapping.pipeline import MapResult, build_map
+from mapping.scandata import ScanData
 from scanner.log import ScanLog
 from scanner.plan import DriveConfig, make_planner
 from scanner.run import DirectBackend, ProgressFn, ScanResult, config_from_meta, run_scan, scan_meta, simulated_site

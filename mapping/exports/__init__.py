@@ -18,7 +18,8 @@ from types import ModuleType
 import trimesh
 
 from mapping.exports.common import ExportJob, scanned_regions
-from mapping.pipeline import MapResult, ScanData
+from mapping.pipeline import MapResult
+from mapping.scandata import ScanData
 
 __all__ = ["ExportJob", "export_all", "export_steps", "formats", "scanned_regions"]
 

@@ -12,7 +12,8 @@ from numpy.typing import NDArray
 
 from mapping import mapfile
 from mapping.evidence import SAFETY_CHANNELS
-from mapping.pipeline import MapResult, ScanData
+from mapping.pipeline import MapResult
+from mapping.scandata import ScanData
 
 
 @dataclass

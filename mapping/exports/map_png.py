@@ -12,6 +12,7 @@ from mapping.exports.common import ExportJob, looked
 from mapping.fusion import CLASSES
 from mapping.pipeline import MapResult
 from mapping.texture import CLASS_COLOURS
+from scanner.channels import INDUCTIVE
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -48,7 +49,7 @@ def write_map_png(result: MapResult, path: str | Path, title: str = "",
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
     fig, ax = plt.subplots(figsize=(10, max(3.0, 10 * aspect) + 0.8))
     grid = result.grid
-    layer = "inductive" if "inductive" in grid.models else grid.sensors[0]
+    layer = INDUCTIVE.name if INDUCTIVE.name in grid.models else grid.sensors[0]
     sig = grid.signal(layer)
     cmap = plt.get_cmap("Greys").with_extremes(bad=(1.0, 0.85, 0.85))  # unknown: pale red
     sig = np.where(looked(result), sig, np.nan)  # only what both safety channels covered counts as looked at

@@ -10,8 +10,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mapping.exports.common import ExportJob
-from mapping.pipeline import MapResult, ScanData
+from mapping.pipeline import MapResult
+from mapping.scandata import ScanData
 from mapping.texture import CLASS_COLOURS
+from scanner.channels import CHANNELS, LINE_PEAKS
 
 FILE_NAME = "signals.png"
 ORDER = 50
@@ -40,7 +42,7 @@ def signals_along_line(data: ScanData, xy: NDArray[np.float64], y_m: float,
         order = np.argsort(xy[sel, 0])
         sel = sel[order]
         runs.append({"x": xy[sel, 0], "y": xy[sel, 1], "direction": s["direction"][sel].astype(np.float64),
-                     **{k: s[k][sel] for k in ("inductive", "ac", "capacitive") if k in s}})
+                     **{c.name: s[c.name][sel] for c in CHANNELS if c.name in s}})
     return runs
 
 
@@ -76,12 +78,13 @@ def write_signal_plot(data: ScanData, result: MapResult, path: str | Path, y_m: 
     if y_m is None:
         y_m = _busiest_height(result)
     runs = signals_along_line(data, result.sample_xy, y_m)
-    fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
-    for ax, key, label in ((axes[0], "inductive", "inductive sensor"), (axes[1], "ac", "AC sensor")):
+    fig, axes = plt.subplots(len(LINE_PEAKS), 1, figsize=(10, 5.5), sharex=True)
+    for ax, ch in zip(axes, LINE_PEAKS, strict=True):
+        key, label = ch.name, ch.label
         for run in runs:
             if key in run:
                 ax.plot(run["x"], run[key], lw=0.9, label=f"row at y ≈ {np.mean(run['y']):.3f} m")
-        ax.set_ylabel(f"{label}\n[display units]")
+        ax.set_ylabel(f"{label}\n[{ch.units}]")
         ax.grid(alpha=0.3)
         for o in result.objects:
             if o.kind == "line":

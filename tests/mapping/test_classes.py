@@ -20,8 +20,8 @@ from geometry.errors import InputError
 from geometry.polyline import densify, distances_to_polyline
 from mapping.evaluate import MIN_COVERAGE, false_safe, truth_class
 from mapping.fusion import METAL_CLASSES
+from mapping.map_object import MapObject
 from mapping.mapfile import parse_object
-from mapping.objects import MapObject
 from mapping.pipeline import MapResult, build_map
 from mapping.simscan import simulate_scan
 from scanner.hard_walls import hard_case_wall

@@ -18,8 +18,9 @@ import pytest
 from mapping.depth import AcModel, Footprint, estimate_depths, inductive_footprint
 from mapping.evaluate import depth_errors, truth_under
 from mapping.fusion import InductiveModel
-from mapping.objects import MapObject
-from mapping.pipeline import MapResult, ScanData, build_map, load_scan
+from mapping.map_object import MapObject
+from mapping.pipeline import MapResult, build_map, load_scan
+from mapping.scandata import ScanData
 from mapping.simscan import simulate_scan
 from scanner.wall import Wall, WallObject, wall_from_dict
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from mapping.evaluate import evaluate, evaluate_measured, pipes_labelled_wood
+from mapping.map_object import MapObject
 from mapping.mapfile import MappedObject
-from mapping.objects import MapObject
 from scanner.wall import Wall, wall_from_dict
 
 CABLE = [[0.3, 0.0], [0.3, 1.0]]

@@ -22,8 +22,8 @@ from mapping.frame_features import (
     frame_features,
     frames_features,
 )
-from mapping.objects import MapObject
-from mapping.pipeline import ScanData
+from mapping.map_object import MapObject
+from mapping.scandata import ScanData
 from mapping.simscan import simulate_scan
 from mapping.stitching import FrameGraph, apply_pose, seam_error
 from scanner.wall import Wall, wall_from_dict

@@ -17,8 +17,9 @@ from numpy.typing import NDArray
 
 from mapping.fusion import CLASSES, Fuser, FusionParams, InductiveModel, class_map
 from mapping.grid import GridInfo, SensorModel, WallGrid
-from mapping.objects import MapObject
-from mapping.pipeline import ScanData, hysteresis_corrected
+from mapping.map_object import MapObject
+from mapping.pipeline import hysteresis_corrected
+from mapping.scandata import ScanData
 from mapping.simscan import simulate_scan
 from scanner.peaks import level_crossings
 from scanner.sensor_model import SensorConfig

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from geometry.polyline import densify, distances_to_polyline
+from mapping.background import background_level
 from mapping.grid import build_grid
-from mapping.objects import background_level, extract_lines, extract_points, extract_regions
+from mapping.objects import extract_lines, extract_points, extract_regions
 
 TRUTH = [
     np.array([[0.30, 0.05], [0.30, 0.95]]),  # vertical

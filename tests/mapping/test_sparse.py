@@ -19,8 +19,8 @@ from geometry.polyline import densify, distances_to_polyline
 from mapping import tolerances as tol
 from mapping.evaluate import truth_class
 from mapping.fusion import FusionParams, InductiveModel
-from mapping.objects import MapObject
-from mapping.pipeline import ScanData
+from mapping.map_object import MapObject
+from mapping.scandata import ScanData
 from mapping.simscan import simulate_scan
 from mapping.sparse import MAX_GAP_M, RANSAC_INLIER_M, PassPeaks, lines_from_passes, pass_peaks, ransac_lines
 from scanner.peaks import level_crossings

@@ -18,7 +18,8 @@ from geometry.errors import InputError
 from geometry.polyline import densify, distances_to_polyline
 from mapping import tolerances as tol
 from mapping.evaluate import MATCH_M, evaluate, false_safe
-from mapping.pipeline import ScanData, build_map
+from mapping.pipeline import build_map
+from mapping.scandata import ScanData
 from mapping.stitching import LASER_SIGMA_FLOOR
 from scanner.log import ScanLog
 from scanner.plan import DensePlanner, DriveConfig, band_ranges, frame_targets, make_planner

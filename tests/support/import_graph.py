@@ -161,6 +161,15 @@ def package_edges(imports: Iterable[Import]) -> set[tuple[str, str]]:
     return {(i.importer_package, i.target_package) for i in imports if i.importer_package != i.target_package}
 
 
+def module_edges(imports: Iterable[Import]) -> set[tuple[str, str]]:
+    """(importer, target) pairs between two modules of the product read (those that are importers themselves),
+    counting lazy and TYPE_CHECKING imports alike: a cycle under TYPE_CHECKING is the same tangle, only hidden
+    from the interpreter. Importing a.b also runs a's __init__, which is not counted as an edge."""
+    found = list(imports)
+    modules = {i.importer for i in found}
+    return {(i.importer, i.target) for i in found if i.target in modules and i.target != i.importer}
+
+
 def find_cycle(edges: Collection[tuple[str, str]]) -> list[str] | None:
     """A cycle among the nodes of a directed graph (as a path that ends where it starts), or None."""
     graph: dict[str, list[str]] = {}
