@@ -298,7 +298,7 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
     or metal; a capacitive object fusion cannot name is left to the evidence layer (an unexplained response).
     A non-metal ridge is a line unless fasteners sit on its centre line (a stud: its outline is drawn), so a
     water pipe is one line, never pieces of area."""
-    from mapping.sparse import lines_from_passes
+    from mapping.sparse import capacitive_from_passes, lines_from_passes
 
     settings = settings or MapSettings()
     model = InductiveModel.from_meta(sensor_meta)
@@ -323,7 +323,8 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
     if "inductive" in grid.models:
         # in units where a screw on a pipe adds to the pipe (a saturated display would flatten it away)
         points = extract_points(additive_units("inductive", grid.signal("inductive")), grid.info,
-                                min_strength=settings.point_min_strength, saturated=ADDITIVE_SATURATED)
+                                min_strength=settings.point_min_strength, saturated=ADDITIVE_SATURATED,
+                                boxes=True)
         points, boxes = points_on_lines(points, lines)
     non_metal: list[MapObject] = []
     if "capacitive" in grid.models and "inductive" in grid.models and sparse_data is None:
@@ -353,9 +354,15 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
         regions += extract_regions(cap, grid.info, -1.0, min_strength=8.0, min_area_m2=0.006,
                                    exclude=near_metal_lines, two_sided=CAP_TWO_SIDED)
     if sparse_data is not None:
-        # the grid is too patchy for areas; the passes' lines are classified already
+        # the grid is too patchy for areas; the passes' lines are classified already, and the capacitive
+        # objects come from the passes too (a straight non-metal run with fasteners on it is a stud)
         metal_found = lines + [_metal_named(fuser.classify(o)) for o in points] + [_box(fuser, o) for o in boxes]
-        capacitive: list[MapObject] = []
+        ridges, cavities = capacitive_from_passes(sparse_data.samples, xy, coverage_radii(sensor_meta)["capacitive"],
+                                                  settings.fusion)
+        fasteners = np.array([p.points_m[0] for p in points]).reshape(-1, 2)
+        capacitive = [_as_outline(MapObject("line", r.points_m[[0, -1]], r.width_m, r.strength, r.cls,
+                                            r.confidence, r.features)) if _is_stud(r, fasteners) else r
+                      for r in ridges] + cavities
     else:
         metal_found = [_metal_named(fuser.classify(o)) for o in lines + points + metal_regions]
         metal_found += [_box(fuser, o) for o in boxes]
