@@ -386,11 +386,19 @@ POINT_RAY_DIRECTIONS = 16  # directions in which a point's surroundings are prob
 POINT_RAY_M = (0.012, 0.030)  # ... from this far out: beyond a fastener's footprint half-width, within a line's run
 POINT_MIN_REL = 0.3  # a point stands at least this share above what it sits on (a line, a stud): pass-to-pass gain
 # jitter (2 % σ) ripples a strong line by under a tenth of its level, a fastener on it adds over half
+BOX_RAY_M = (0.035, 0.08)  # a socket box's rays: beyond a 6-7 cm box's edge, to where its response is gone
+BOX_MIN_PLATEAU = 0.45  # a peak still holding this share of its height 1.2-3 cm out is a box's plateau: a 6-7 cm
+# box's edge lies 3-3.5 cm out, a screw's or nail's footprint (σ 11-16 mm) has lost most of it there (24 hard-case
+# and 6 random walls: fasteners 0.07-0.38 on dense scans, up to 0.50 on adaptive ones, where a pass 1 cm beside a
+# loose screw spreads it along that pass; socket and junction boxes 0.49-0.78)
+BOX_MIN_HALF_WIDTH_M = 0.03  # ... and it falls half-way to the empty wall beside it no nearer than this (median
+# over its rays): a box at its edge, 3-3.5 cm out, a fastener within 2-2.6 cm (boxes 0.034-0.043 m; fasteners
+# 0.017-0.026 m on dense scans, and the adaptive ones with a plateau over 0.4 at most 0.020 m)
 
 
 def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float = 0.004,
                    min_strength: float = 6.0, min_rel: float = POINT_MIN_REL,
-                   saturated: float | None = None) -> list[MapObject]:
+                   saturated: float | None = None, boxes: bool = False) -> list[MapObject]:
     """Small peaks (screws, nails) as 'point' MapObjects with sub-cell positions, alone or on top of a line or
     an area (a screw on a pipe, a steel stud's screws): signal in units where objects add up.
 
@@ -404,6 +412,17 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
     stud saturates over 3 cm) is that top's middle, not whichever of its equal cells the maximum filter keeps,
     and its rays start at the top's edge (its equivalent radius): rays from an off-centre cell, or too short,
     would end on the top or its tail and read it as what the point sits on.
+
+    boxes: also find socket and junction boxes (metal larger than a screw, never a fastener). A 6-7 cm box's
+    rays up to 3 cm end on the box itself, which then seems to sit on its own plateau; so the rays run on to
+    BOX_RAY_M[1] and each peak is judged again against what it sits on beyond a box's edge ("box_base", σ units:
+    over the rays, the highest of each ray's lowest value within BOX_RAY_M — a line that runs into the box, or
+    the empty wall). A peak is a box where it rises min_strength and min_rel above that, still holds
+    BOX_MIN_PLATEAU of that rise at its near rays' ends ("plateau": (base − box_base) / (height − box_base)) and
+    falls half-way to the lowest of those rays' values (the wall beside it) no nearer than BOX_MIN_HALF_WIDTH_M
+    ("box_half_width_m", median over the rays measured to BOX_RAY_M[1]). A box has feature "box", twice that
+    half width as its width and its rise over box_base as its strength; it is kept whether or not it passes the
+    point test. Where two lines cross or a line bends, the same plateau shows: metal there too.
     """
     z, _, _ = normalise(signal)
     known = np.isfinite(signal)
@@ -431,8 +450,10 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
             radius[on_top] = np.sqrt(areas[label[on_top] - 1] / np.pi)
             rows, cols, origin, on_top, radius = rows[keep], cols[keep], origin[keep], on_top[keep], radius[keep]
     angles = np.arange(POINT_RAY_DIRECTIONS) * 2.0 * np.pi / POINT_RAY_DIRECTIONS
-    steps = np.arange(0.0, POINT_RAY_M[1] + 1e-9, min(info.resolution, 0.002)) / info.resolution
-    far = steps >= POINT_RAY_M[0] / info.resolution
+    step = min(info.resolution, 0.002)
+    n_near = len(np.arange(0.0, POINT_RAY_M[1] + 1e-9, step))  # the point's own rays; a box's run on
+    steps = np.arange(0.0, (BOX_RAY_M[1] if boxes else POINT_RAY_M[1]) + 1e-9, step) / info.resolution
+    far = (steps >= POINT_RAY_M[0] / info.resolution) & (np.arange(len(steps)) < n_near)
     # (peaks, directions, steps) profiles of the smoothed map along the rays
     reach = steps[None, None, :] + radius[:, None, None]
     rr = origin[:, 0, None, None] + np.sin(angles)[None, :, None] * reach
@@ -441,13 +462,27 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
     # On a sparse map only rays along measured passes tell what the point sits on: a ray counts where its far
     # end was measured, over its measured steps (between passes the smoothing spreads the peak's own values)
     seen = ndimage.map_coordinates(w, [rr.ravel(), cc.ravel()], order=1, mode="nearest").reshape(rr.shape) > 0.5
-    ray_low = np.where(seen[:, :, far], profile[:, :, far], np.inf).min(axis=2)
-    base = np.where(seen[:, :, -1], ray_low, -np.inf).max(axis=1)
-    base[~np.isfinite(base)] = np.inf  # no ray measured to its end: nothing to judge the peak against
     height = s[rows, cols]
+    base = _ray_base(_ray_lows(profile, seen, far, n_near - 1))
     bump = height - base
+    is_point = (bump >= min_strength) & (bump >= min_rel * np.maximum(base, 0.0))
+    box_base = np.full(rows.size, np.inf)
+    box_half = np.full(rows.size, np.nan)
+    plateau = np.full(rows.size, np.nan)
+    is_box = np.zeros(rows.size, bool)
+    if boxes:
+        lows = _ray_lows(profile, seen, steps >= BOX_RAY_M[0] / info.resolution, len(steps) - 1)
+        box_base = _ray_base(lows)
+        floor = np.where(np.isfinite(lows), lows, np.inf).min(axis=1)  # the empty wall beside it
+        box_bump = height - box_base
+        judged = np.isfinite(base) & np.isfinite(box_base) & (box_bump > 0)
+        with np.errstate(all="ignore"):
+            plateau = np.where(judged, (base - box_base) / box_bump, np.nan)
+        box_half = _half_widths(profile, seen[:, :, -1], 0.5 * (height + floor), steps, radius) * info.resolution
+        is_box = judged & (box_bump >= min_strength) & (box_bump >= min_rel * np.maximum(box_base, 0.0)) & \
+            (plateau >= BOX_MIN_PLATEAU) & (box_half >= BOX_MIN_HALF_WIDTH_M)
     out = []
-    for k in np.flatnonzero((bump >= min_strength) & (bump >= min_rel * np.maximum(base, 0.0))):
+    for k in np.flatnonzero(is_point | is_box):
         rr_k, cc_k = rows[k], cols[k]
         H = np.array([[hxx[rr_k, cc_k], hxy[rr_k, cc_k]], [hxy[rr_k, cc_k], hyy[rr_k, cc_k]]])
         g = np.array([gx[rr_k, cc_k], gy[rr_k, cc_k]])
@@ -460,13 +495,52 @@ def extract_points(signal: NDArray[np.float64], info: GridInfo, sigma_m: float =
         elif not np.all(np.isfinite(off)) or np.any(np.abs(off) > 1.0):
             off = np.zeros(2)  # a flat top: the cell itself
         xy = info.to_wall(np.array([[cc_k + off[0], rr_k + off[1]]]))
-        below = profile[k] <= (base[k] + 0.5 * bump[k])
-        first = np.where(below.any(axis=1), below.argmax(axis=1), len(steps) - 1)
-        half_width = float(np.median(steps[first]) + radius[k]) * info.resolution
-        obj = MapObject("point", xy, 2.0 * half_width, float(bump[k]))
+        near_profile = profile[k:k + 1, :, :n_near]
+        half_width = float(_half_widths(near_profile, np.ones((1, POINT_RAY_DIRECTIONS), bool),
+                                        np.array([base[k] + 0.5 * bump[k]]), steps[:n_near], radius[k:k + 1])[0])
+        half_width *= info.resolution
+        if is_box[k]:  # as wide as its response over the wall beside it, as high as it stands over what lies beyond
+            obj = MapObject("point", xy, 2.0 * float(box_half[k]), float(height[k] - box_base[k]))
+            obj.features["box"] = 1.0
+        else:
+            obj = MapObject("point", xy, 2.0 * half_width, float(bump[k]))
         obj.features["base"] = float(base[k])
         obj.features["half_width_m"] = half_width
+        if boxes:
+            obj.features["box_base"] = float(box_base[k])
+            obj.features["box_half_width_m"] = float(box_half[k])
+            obj.features["plateau"] = float(plateau[k])
         out.append(obj)
+    return out
+
+
+def _ray_lows(profile: NDArray[np.float64], seen: NDArray[np.bool_], window: NDArray[np.bool_],
+              end: int) -> NDArray[np.float64]:
+    """Each ray's lowest measured value within `window` (steps), (n, directions); NaN on rays not measured at
+    step `end`."""
+    low = np.where(seen[:, :, window], profile[:, :, window], np.inf).min(axis=2)
+    return np.where(seen[:, :, end], low, np.nan)
+
+
+def _ray_base(lows: NDArray[np.float64]) -> NDArray[np.float64]:
+    """What each peak sits on (n,): the highest of its rays' lows (_ray_lows); +inf where no ray was measured to
+    its end (nothing to judge the peak against)."""
+    measured = np.isfinite(lows).any(axis=1)
+    return np.where(measured, np.max(np.where(np.isfinite(lows), lows, -np.inf), axis=1), np.inf)
+
+
+def _half_widths(profile: NDArray[np.float64], rays: NDArray[np.bool_], level: NDArray[np.float64],
+                 steps: NDArray[np.float64], radius: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Median over the chosen rays (n, directions) of the first step where each peak's profile falls to its
+    level (n,), plus the rays' start radius, cells; a ray that never does counts its last step; NaN where no
+    ray is chosen."""
+    below = np.asarray(profile <= level[:, None, None], dtype=np.bool_)
+    first = np.where(below.any(axis=2), below.argmax(axis=2), len(steps) - 1)
+    dist = np.where(rays, steps[first], np.nan)
+    chosen = np.asarray(np.any(rays, axis=1), dtype=np.bool_)
+    with np.errstate(all="ignore"):
+        out = np.asarray(np.nanmedian(np.where(chosen[:, None], dist, 0.0), axis=1) + radius, dtype=np.float64)
+    out[~chosen] = np.nan
     return out
 
 
@@ -534,13 +608,17 @@ POINT_END_LATERAL_M = 0.015  # ... and on the line's course: a screw beside a li
 
 def points_on_lines(points: list[MapObject], lines: list[MapObject],
                     clearance_m: float = tol.JOIN_ENDPOINT_M * 0.5) -> tuple[list[MapObject], list[MapObject]]:
-    """(fasteners, boxes) of the point peaks given the lines: a peak where two lines meet or cross, or at a
-    line's end, is what the lines meet at (a box, a junction, the crossing itself: metal, not a fastener);
-    the others — alone or on one line's run — are fasteners."""
+    """(fasteners, boxes) of the point peaks given the lines: a box-sized peak (extract_points' feature "box":
+    a plateau wider than a screw's footprint) is a box wherever it lies; a peak where two lines meet or cross,
+    or at a line's end, is what the lines meet at (a box, a junction, the crossing itself: metal, not a
+    fastener); the others — alone or on one line's run — are fasteners."""
     polylines = [ln for ln in lines if ln.points_m.shape[0] >= 2]
     fasteners: list[MapObject] = []
     boxes: list[MapObject] = []
     for p in points:
+        if p.features.get("box"):
+            boxes.append(p)
+            continue
         q = p.points_m[0]
         near = [ln for ln in polylines if _distance_to_polyline(q, ln.points_m) <= max(clearance_m, ln.width_m)]
         at_end = any(_beyond_end(q, ln.points_m) for ln in polylines)

@@ -299,7 +299,7 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
     or metal; a capacitive object fusion cannot name is left to the evidence layer (an unexplained response).
     A non-metal ridge is a line unless fasteners sit on its centre line (a stud: its outline is drawn), so a
     water pipe is one line, never pieces of area."""
-    from mapping.sparse import lines_from_passes
+    from mapping.sparse import capacitive_from_passes, lines_from_passes
 
     settings = settings or MapSettings()
     ex = settings.extraction
@@ -326,7 +326,8 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
     if INDUCTIVE.name in grid.models:
         # in units where a screw on a pipe adds to the pipe (a saturated display would flatten it away)
         points = extract_points(additive_units(INDUCTIVE.name, grid.signal(INDUCTIVE.name)), grid.info,
-                                min_strength=ex.point_min_strength, saturated=ADDITIVE_SATURATED)
+                                min_strength=ex.point_min_strength, saturated=ADDITIVE_SATURATED,
+                                boxes=True)
         points, boxes = points_on_lines(points, lines)
     non_metal: list[MapObject] = []
     if CAPACITIVE.name in grid.models and INDUCTIVE.name in grid.models and sparse_data is None:
@@ -361,9 +362,16 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
                                    min_area_m2=ex.capacitive_region_min_area_m2, exclude=near_metal_lines,
                                    two_sided=CAP_TWO_SIDED)
     if sparse_data is not None:
-        # the grid is too patchy for areas; the passes' lines are classified already
+        # the grid is too patchy for areas; the passes' lines are classified already, and the capacitive
+        # objects come from the passes too (a straight non-metal run with fasteners on it is a stud)
         metal_found = lines + [_metal_named(fuser.classify(o)) for o in points] + [_box(fuser, o) for o in boxes]
-        capacitive: list[MapObject] = []
+        cap_radius = coverage_radii(sensor_meta)[CAPACITIVE.name]
+        ridges, cavities = (capacitive_from_passes(sparse_data.samples, xy, cap_radius, settings.fusion)
+                            if xy is not None else ([], []))
+        fasteners = np.array([p.points_m[0] for p in points]).reshape(-1, 2)
+        capacitive = [_as_outline(MapObject("line", r.points_m[[0, -1]], r.width_m, r.strength, r.cls,
+                                            r.confidence, r.features)) if _is_stud(r, fasteners, ex) else r
+                      for r in ridges] + cavities
     else:
         metal_found = [_metal_named(fuser.classify(o)) for o in lines + points + metal_regions]
         metal_found += [_box(fuser, o) for o in boxes]

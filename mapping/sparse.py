@@ -21,10 +21,11 @@ from scipy.special import expit
 from geometry.polyline import distances_to_polyline
 from geometry.robust import best_hypothesis, draw_samples, fit_line, refine
 from mapping import tolerances as tol
+from mapping.background import background_level
 from mapping.fusion import FusionParams, InductiveModel, raw_from_display
 from mapping.map_object import MapObject
 from mapping.objects import join_polylines
-from scanner.channels import AC, INDUCTIVE
+from scanner.channels import AC, CAPACITIVE, INDUCTIVE
 from scanner.peaks import PeakConfig, detect_peaks, level_crossings
 from scanner.sensor_model import additive_units
 
@@ -50,8 +51,9 @@ class PassPeaks:
 
 
 def pass_peaks(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: str, lag_m: float = 0.0,
-               min_height: float = 0.04) -> PassPeaks:
-    """Peaks of `channel` along every pass; the along-pass coordinate is shifted back by lag_m (hysteresis)."""
+               min_height: float = 0.04, base: float | None = None) -> PassPeaks:
+    """Peaks of `channel` along every pass; the along-pass coordinate is shifted back by lag_m (hysteresis);
+    heights over `base` (default: the scan's 20th percentile of the channel)."""
     pids = samples["pass_id"]
     order = np.argsort(pids, kind="stable")
     pid_sorted = pids[order]
@@ -63,7 +65,7 @@ def pass_peaks(samples: dict[str, NDArray], xy: NDArray[np.float64], channel: st
     finite = values[np.isfinite(values)]
     # one background for the whole scan: a short trace pass's own 20th percentile sits on the peak's tails
     # and would shrink both the height and the width
-    global_base = float(np.percentile(finite, 20)) if finite.size else 0.0
+    global_base = base if base is not None else float(np.percentile(finite, 20)) if finite.size else 0.0
     rows: list[_Row] = []  # every crossing pass, sorted along
     for a, b in zip(starts, ends, strict=True):
         idx = order[a:b]
@@ -415,3 +417,153 @@ def _classify_inductive(obj: MapObject, baseline: float, model: InductiveModel, 
     scores = {"power_line": cable, "metal_pipe": (1 - cable) * (1 - sheet), "metal": (1 - cable) * sheet}
     obj.cls = max(scores, key=scores.get)  # type: ignore[arg-type]
     obj.confidence = float(scores[obj.cls] / max(sum(scores.values()), 1e-9))
+
+
+CAP_MIN_SIGMAS = 10.0  # a capacitive crossing rises (or a cavity falls) this many background σ: 0.04 at the
+# simulated 0.004 noise; a wooden stud behind drywall rises 0.28, a water-filled pipe 2-3 cm deep ~0.1, a cavity
+# falls 0.19 (hard-case walls)
+CAP_METAL_HEIGHT = 0.04  # inductive display units over its background beside a crossing: metal there (pass_peaks'
+# own inductive threshold), so the raised capacitive level is metal's echo, not wood or water
+CAP_METAL_REACH_M = 0.015  # ... looked for within the crossing's half width, or this far if that is less
+CAVITY_MIN_LENGTH_M = 0.03  # a lowered stretch shorter than this is no cavity (the dense map's narrowest region)
+CAVITY_EDGE_SHARE = 0.5  # a stretch lowered by less than this share of the deepest within CAVITY_NEIGHBOUR_M ...
+CAVITY_NEIGHBOUR_M = 0.3  # ... ran beside that cavity, outside its edge (a footprint at the edge sees half)
+
+
+def capacitive_from_passes(samples: dict[str, NDArray], xy: NDArray[np.float64], lateral_m: float,
+                           params: FusionParams) -> tuple[list[MapObject], list[MapObject]]:
+    """(non-metal lines, cavities) from the capacitive readings of a sparse scan's crossing passes.
+
+    Non-metal: capacitive peaks of the crossing passes where the inductive channel, on the same pass, shows no
+    metal (the capacitive level rises over metal too: there it is metal's echo, which the inductive lines
+    name), linked into straight runs as the inductive peaks are (ransac_lines, the same refusals: a run crossed
+    in fewer than MIN_CROSSING_PLACES places, a point seen by its flanks, a run that passes along it refute),
+    joined at bends. Each is a line of class "non_metal" (a wooden stud or a water-filled pipe: the channel
+    cannot tell which; the caller tells a stud by its fasteners). Cavities: every stretch of a crossing pass
+    where the capacitive level falls below the wall's by CAP_MIN_SIGMAS σ and more, between its half-depth
+    points, is a measured stretch of a cavity: an outline along it, lateral_m (the channel's coverage radius)
+    to each side. Nothing is drawn where no pass measured; stretches of one row that overlap (a cavity cut by
+    two frames' passes) are one outline."""
+    if CAPACITIVE.name not in samples or INDUCTIVE.name not in samples:
+        return [], []
+    cap = np.asarray(samples[CAPACITIVE.name], dtype=np.float64)
+    crossing = (np.asarray(samples["axis"]) <= 1) & np.isfinite(cap) & np.all(np.isfinite(xy), axis=1)
+    if crossing.sum() < 10:
+        return [], []
+    level, sigma = background_level(cap[crossing], two_sided=True)
+    threshold = CAP_MIN_SIGMAS * sigma
+    peaks = pass_peaks(samples, xy, CAPACITIVE.name, 0.0, min_height=threshold, base=level)
+    keep = ~_metal_beside(peaks, samples, xy)
+    peaks = PassPeaks(peaks.xy[keep], peaks.height[keep], peaks.width[keep], peaks.axis[keep],
+                      peaks.pass_id[keep], peaks.baseline)
+    along = (xy, cap, samples["axis"])
+    runs = [r for r in ransac_lines(peaks)
+            if not _crossed_in_few_places(r[0], peaks.xy[r[1]])
+            and not _a_point_seen_by_its_flanks(r[0], peaks.height[r[1]] + level, level, CAPACITIVE.name)
+            and not _refuted_along(r[0], float(np.min(peaks.height[r[1]])), level, *along)]
+    lines = []
+    if runs:
+        widths, heights = [], []
+        for poly, ii in runs:
+            u = (poly[1] - poly[0]) / max(float(np.linalg.norm(poly[1] - poly[0])), 1e-12)
+            sin = np.where(peaks.axis[ii] == 0, np.abs(u[1]), np.abs(u[0]))  # oblique crossings look wider
+            widths.append(float(np.median(peaks.width[ii] * sin)))
+            heights.append(float(np.median(peaks.height[ii])))
+        joined, widths, heights = join_polylines([r[0] for r in runs], widths, heights)
+        s = params.softness
+        for poly, width, height in zip(joined, widths, heights, strict=True):
+            obj = MapObject("line", poly, width, height / sigma)
+            z = height / sigma
+            raised = float(expit((z - params.capacitive_min_z) / (s * params.capacitive_min_z)))
+            obj.cls, obj.confidence = ("non_metal", raised) if raised >= 0.5 else ("unknown", raised)
+            obj.features = {"length_m": obj.length_m(), "width_m": width, "capacitive_z": z,
+                            "capacitive_peak": height, "p_non_metal": raised, "p_nothing": 1.0 - raised}
+            if obj.cls == "non_metal":
+                lines.append(obj)
+    return lines, _cavities(samples, xy, cap, level, threshold, sigma, lateral_m, params)
+
+
+def _metal_beside(peaks: PassPeaks, samples: dict[str, NDArray], xy: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """(n,) whether the inductive channel shows metal beside each capacitive peak on its own pass: a reading
+    CAP_METAL_HEIGHT over the inductive background within the peak's half width (CAP_METAL_REACH_M at least)."""
+    ind = np.asarray(samples[INDUCTIVE.name], dtype=np.float64)
+    finite = ind[np.isfinite(ind)]
+    base = float(np.percentile(finite, 20)) if finite.size else 0.0
+    pids = np.asarray(samples["pass_id"])
+    out = np.zeros(len(peaks.xy), bool)
+    for k, (point, width, pid) in enumerate(zip(peaks.xy, peaks.width, peaks.pass_id, strict=True)):
+        on_pass = np.flatnonzero(pids == pid)
+        near = on_pass[np.linalg.norm(xy[on_pass] - point, axis=1) <= max(0.5 * width, CAP_METAL_REACH_M)]
+        values = ind[near]
+        values = values[np.isfinite(values)]
+        out[k] = values.size == 0 or float(values.max()) - base >= CAP_METAL_HEIGHT
+    return out
+
+
+def _cavities(samples: dict[str, NDArray], xy: NDArray[np.float64], cap: NDArray[np.float64], level: float,
+              threshold: float, sigma: float, lateral_m: float, params: FusionParams) -> list[MapObject]:
+    """Cavity outlines from the lowered stretches of the crossing passes (see capacitive_from_passes)."""
+    pids = np.asarray(samples["pass_id"])
+    axes = np.asarray(samples["axis"])
+    pieces: list[tuple[int, float, float, float, float]] = []  # (axis, across, start, end, depth)
+    for pid in np.unique(pids[axes <= 1]):
+        idx = np.flatnonzero(pids == pid)
+        ok = np.isfinite(cap[idx]) & np.all(np.isfinite(xy[idx]), axis=1)
+        idx = idx[ok]
+        if idx.size < 10:
+            continue
+        axis = int(axes[idx[0]])
+        t = xy[idx, axis]
+        srt = np.argsort(t)
+        t, v = t[srt], level - cap[idx][srt]  # how far the level falls
+        across = float(np.median(xy[idx, 1 - axis]))
+        # stretches entered at threshold and left at half of it: noise at a flank starts no stretch of its own
+        low = v >= 0.5 * threshold
+        starts = np.flatnonzero(low & ~np.r_[False, low[:-1]])
+        ends = np.flatnonzero(low & ~np.r_[low[1:], False])
+        for a, b in zip(starts, ends, strict=True):
+            if float(v[a:b + 1].max()) < threshold:
+                continue
+            depth = float(np.percentile(v[a:b + 1], 90))
+            half = 0.5 * depth
+            # from its deepest sample out to the half-depth points, or the pass's end where the cavity runs on
+            lo = hi = a + int(np.argmax(v[a:b + 1]))
+            while lo > 0 and v[lo - 1] >= half:
+                lo -= 1
+            while hi < len(v) - 1 and v[hi + 1] >= half:
+                hi += 1
+            start = float(np.interp(half, [v[lo - 1], v[lo]], [t[lo - 1], t[lo]])) if lo > 0 else float(t[0])
+            end = float(np.interp(half, [v[hi + 1], v[hi]], [t[hi + 1], t[hi]])) if hi < len(v) - 1 else \
+                float(t[-1])
+            if end - start >= CAVITY_MIN_LENGTH_M:
+                pieces.append((axis, across, start, end, depth))
+    # stretches of one row (two frames' passes, a few mm apart across) that overlap are one stretch
+    pieces.sort()
+    merged: list[list[float]] = []
+    for axis, across, start, end, depth in pieces:
+        last = merged[-1] if merged else None
+        if last is not None and last[0] == axis and abs(across - last[1]) <= SEAM_ACROSS_M and start <= last[3]:
+            last[3] = max(last[3], end)
+            last[4] = max(last[4], depth)
+        else:
+            merged.append([axis, across, start, end, depth])
+    # a pass over a cavity sees at least half its depth (half at its edge); one that sees less beside a deeper
+    # stretch runs beside the cavity, outside its edge: its lowered level stays an unexplained response
+    segments = [np.array([(a, c) if ax == 0 else (c, a) for a in (lo, hi)]) for ax, c, lo, hi, _ in merged]
+    out = []
+    s = params.softness
+    for (row_axis, across, start, end, depth), seg in zip(merged, segments, strict=True):
+        near = [m[4] for m, other in zip(merged, segments, strict=True)
+                if float(distances_to_polyline(np.linspace(seg[0], seg[1], 11), other).min()) <= CAVITY_NEIGHBOUR_M]
+        if depth < CAVITY_EDGE_SHARE * max(near):
+            continue
+        corners = [(start, across - lateral_m), (end, across - lateral_m), (end, across + lateral_m),
+                   (start, across + lateral_m), (start, across - lateral_m)]
+        ring = np.array([(a, b) if row_axis == 0 else (b, a) for a, b in corners])
+        z = depth / sigma
+        lowered = float(expit((z - params.capacitive_min_z) / (s * params.capacitive_min_z)))
+        obj = MapObject("outline", ring, 2.0 * lateral_m, z, "cavity", lowered)
+        obj.features = {"polarity": -1.0, "capacitive_z": -z, "p_cavity": lowered, "p_nothing": 1.0 - lowered,
+                        "area_m2": (end - start) * 2.0 * lateral_m}
+        out.append(obj)
+    return out

@@ -171,3 +171,59 @@ def test_two_sided_background_is_not_fooled_by_lowered_objects():
     raised_only[:60_000] += 0.2
     assert background_level(raised_only, two_sided=True) == background_level(raised_only)
 
+
+
+def _square(p, centre, side, sigma):
+    """A square plate's footprint-blurred response (a product of erf differences), 1 on the plate."""
+    from scipy.special import erf
+
+    out = np.ones(len(p))
+    for axis, s in enumerate(sigma):
+        t = p[:, axis] - centre[axis]
+        out *= 0.5 * (erf((t + side / 2) / (np.sqrt(2) * s)) - erf((t - side / 2) / (np.sqrt(2) * s)))
+    return out
+
+
+def test_a_socket_box_is_a_box_and_the_screws_stay_fasteners():
+    """A 6.5 cm steel box at the end of a cable as strong as three quarters of it (hard-21's socket, the
+    weakest box on the hard-case walls), a lone box, a loose screw, screws on a pipe and on a steel stud: the
+    boxes are metal boxes (extract_points' "box"), at their middles, as wide as a box; every screw is a
+    fastener."""
+    from scipy.special import erf
+
+    from mapping.objects import points_on_lines
+
+    sigma = (0.016, 0.019)  # the inductive footprint 2 cm deep (σ 11-16 mm, widened by 0.55 · depth)
+    box, lone_box = np.array([0.15, 0.60]), np.array([0.45, 0.25])
+    loose, pipe = np.array([0.45, 0.60]), np.array([[0.25, 0.0], [0.25, 0.8]])
+    on_pipe, on_stud = np.array([0.257, 0.30]), np.array([0.70, 0.45])
+
+    def cable(p):  # up from the box's top edge: its footprint integral falls to half at its end
+        across = np.exp(-0.5 * ((p[:, 0] - box[0]) / sigma[0]) ** 2)
+        return across * 0.5 * (1 + erf((p[:, 1] - box[1] - 0.0325) / (np.sqrt(2) * sigma[1])))
+
+    def signal(p):
+        out = 0.8 * _square(p, box, 0.065, sigma) + 0.6 * cable(p)
+        out += 1.2 * _square(p, lone_box, 0.065, sigma)
+        out += 3.0 * np.exp(-0.5 * (distances_to_polyline(p, pipe) / 0.012) ** 2) + 3.0 * _strip(p)
+        for q in (loose, on_pipe, on_stud):
+            out += _blob(p, q, 2.0)
+        return out
+
+    grid = _raster(signal, seed=7)
+    lines = extract_lines(grid.signal("inductive"), grid.info)
+    points = extract_points(grid.signal("inductive"), grid.info, min_strength=8.0, boxes=True)
+    fasteners, boxes = points_on_lines(points, lines)
+    for truth in (box, lone_box):
+        near = [b for b in boxes if np.linalg.norm(b.points_m[0] - truth) < 0.01]
+        assert len(near) == 1 and near[0].features.get("box") == 1.0, truth
+        assert 0.06 <= near[0].width_m <= 0.09  # a box's size (its response's, over the wall beside it)
+        assert not [f for f in fasteners if np.linalg.norm(f.points_m[0] - truth) < 0.05]
+    found = np.array([f.points_m[0] for f in fasteners]).reshape(-1, 2)
+    for truth in (loose, on_pipe, on_stud):
+        assert np.min(np.linalg.norm(found - truth, axis=1)) < 0.005, truth
+    assert not [p for p in points if p.features.get("box") and min(np.linalg.norm(p.points_m[0] - q) for q in
+                                                                   (loose, on_pipe, on_stud)) < 0.02]
+    # without boxes=True the points are what they were: the weak box at the cable's end is no peak of its own
+    plain = extract_points(grid.signal("inductive"), grid.info, min_strength=8.0)
+    assert not any("box" in p.features for p in plain)

@@ -1,5 +1,6 @@
 """Scan log → map → objects on simulated scans (scanner's sensor model), bad logs, exports, the CLI."""
 
+import functools
 import json
 import sqlite3
 
@@ -9,7 +10,7 @@ import trimesh
 
 from geometry.errors import InputError
 from mapping.evaluate import evaluate
-from mapping.pipeline import MapSettings, build_map, load_scan
+from mapping.pipeline import MapSettings, ScanData, build_map, load_scan
 from mapping.simscan import simulate_scan, write_log
 from scanner.log import ScanLog
 from scanner.wall import load_wall, shipped_walls
@@ -273,3 +274,127 @@ def test_map_of_a_log_stitches_with_the_logged_laser_fix(tmp_path):
                              laser=False)
     # The laser fix is what holds the chain: without it, seams are several times worse (here ~60x)
     assert _seams_mm(no_laser, stitch_frames(no_laser)[0]).mean() > 3 * after.mean()
+
+
+# ---- studs, plates (socket boxes) and cavities on the scanner's own dense and adaptive scans ----------------
+
+@functools.cache
+def _scanned(wall_key: str | int, plan: str):
+    """(wall, map) of the scanning subsystem's own scan (plan "dense" or "adaptive", in-process devices, the
+    bench's seed: the hard-case wall's index, else 0) of a hard-case wall (index) or a shipped wall (name),
+    mapped as `arproj map` does."""
+    from scanner.hard_walls import hard_case_wall
+    from scanner.plan import DriveConfig
+    from scanner.run import DirectBackend, run_scan, scan_meta, simulated_site
+    from scanner.sensor_model import SensorConfig
+
+    wall = hard_case_wall(wall_key) if isinstance(wall_key, int) else load_wall(shipped_walls()[wall_key])
+    seed = wall_key if isinstance(wall_key, int) else 0
+    sensor, drives = SensorConfig(), DriveConfig()
+    world, robot = simulated_site(wall, sensor, drives, seed)
+    scan = run_scan(wall, DirectBackend(world), robot, plan_kind=plan, sensor=sensor, drives=drives)
+    meta = scan_meta(wall, wall.source, {"kind": plan}, sensor, drives, seed, True)
+    return wall, build_map(ScanData.from_scan(f"{plan} scan of {wall.name}", scan.samples, scan.frames, meta))
+
+
+@pytest.mark.parametrize("plan", ["dense", "adaptive"])
+def test_socket_and_junction_boxes_are_metal_boxes_never_fasteners(plan):
+    """hard-07: a junction box with cables to three socket boxes, and loose screws and nails. Each box is a
+    metal point at its middle (a dense raster missed the junction box, the adaptive plan called a socket a
+    fastener), no fastener lies on a box, and no screw or nail is taken for a box."""
+    from mapping.evaluate import area_recall, fastener_recall
+
+    wall, result = _scanned(7, plan)
+    plates = [o for o in wall.objects if o.kind == "plate"]
+    fasteners = [o for o in result.objects if o.cls == "fastener"]
+    for plate in plates:
+        ring = np.asarray(plate.geometry_m, dtype=np.float64)
+        middle, half = ring.mean(axis=0), 0.5 * float(np.ptp(ring, axis=0).min())
+        boxes = [o for o in result.objects if o.kind == "point" and o.features.get("box")
+                 and np.linalg.norm(o.points_m[0] - middle) < 0.01]
+        assert len(boxes) == 1 and boxes[0].cls == "metal", plate.id
+        assert not [f for f in fasteners if np.linalg.norm(f.points_m[0] - middle) <= half], plate.id
+    found, total, missed = area_recall(result.objects, wall)
+    assert found == total == len(plates), missed
+    screws = np.array([o.geometry_m[0] for o in wall.objects if o.kind in ("screw", "nail")])
+    box_points = np.array([o.points_m[0] for o in result.objects if o.features.get("box")]).reshape(-1, 2)
+    assert np.min(np.linalg.norm(box_points[:, None] - screws[None], axis=2)) > 0.05
+    # the dense raster finds every loose fastener; the adaptive rows (25 cm apart) find those they pass near
+    found, total = fastener_recall(result.objects, wall)
+    assert total == 5 and found >= (5 if plan == "dense" else 3)
+
+
+def _inside_or_near(points: np.ndarray, ring: np.ndarray, reach_m: float) -> np.ndarray:
+    """(n,) whether each point lies inside the ring or within reach_m of it."""
+    from geometry.polyline import distances_to_polyline
+    from scanner.sensor_model import points_in_polygon
+
+    return points_in_polygon(points, ring) | (distances_to_polyline(points, np.vstack([ring, ring[:1]])) <= reach_m)
+
+
+def _gap_m(points: np.ndarray, geometry: np.ndarray) -> float:
+    """Least distance from points (n, 2) to a polyline or ring's edge."""
+    from geometry.polyline import distances_to_polyline
+
+    return float(distances_to_polyline(points, geometry).min())
+
+
+CAP_FOOTPRINT_SIGMA_M = 0.022  # the capacitive footprint's σ: twice the inductive 11 mm (scanner.sensor_model)
+
+
+def test_an_adaptive_scan_maps_wooden_studs_and_a_cavity_from_its_passes():
+    """hard-05 on the adaptive plan (its coarse rows read the capacitive channel too): each wooden stud, whose
+    nails the plan found, is one non-metal outline along its whole height, as wide as its capacitive response;
+    the cavity is mapped where passes crossed it and every cavity outline lies on it; nothing non-metal lies on
+    the cables."""
+    from mapping.evaluate import area_recall, pipes_labelled_wood
+    from scanner.sensor_model import points_in_polygon
+    from scanner.wall import densify
+
+    wall, result = _scanned(5, "adaptive")
+    assert any("sparse scan" in n for n in result.notes)
+    for stud in (o for o in wall.objects if o.kind == "stud"):
+        ring = np.asarray(stud.geometry_m, dtype=np.float64)
+        x = float(ring[:, 0].mean())
+        probe = densify(np.array([[x, 0.05], [x, 1.95]]), 0.01)
+        holding = [o for o in result.objects if o.kind == "outline" and o.cls == "non_metal"
+                   and points_in_polygon(probe, o.points_m).mean() > 0.1]
+        assert len(holding) == 1 and points_in_polygon(probe, holding[0].points_m).all(), stud.id
+        width = float(np.ptp(ring[:, 0]))
+        assert width <= holding[0].width_m <= width + 2 * CAP_FOOTPRINT_SIGMA_M, stud.id
+    cavity = np.asarray(wall.by_id("cavity1-cavity").geometry_m, dtype=np.float64)
+    mapped = [o for o in result.objects if o.cls == "cavity"]
+    assert mapped
+    for o in mapped:
+        assert _inside_or_near(o.points_m[:-1], cavity, CAP_FOOTPRINT_SIGMA_M).all(), np.round(o.points_m, 3)
+    found, total, missed = area_recall(result.objects, wall)
+    assert found == total == 3, missed
+    assert not pipes_labelled_wood(result.objects, wall)
+    cables = [np.asarray(o.points_m) for o in wall.objects if o.kind == "cable"]
+    for o in (o for o in result.objects if o.cls == "non_metal"):
+        assert all(_gap_m(densify(o.points_m, 0.01), c) > 0.04 for c in cables)
+
+
+def test_an_adaptive_scan_of_drywall_studs_maps_its_water_pipe_and_cavity_but_not_metal_as_non_metal():
+    """drywall_studs on the adaptive plan: the water-filled plastic pipe is one non-metal line on its course
+    (the capacitive channel cannot tell it from wood; no fasteners on it), the cavity behind the removed board
+    is mapped within it, and the steel studs, the steel pipe and the cables are never non-metal. The wooden
+    beam along the wall's top edge is not found: the columns that cross it end on it (a crossing cut by the
+    wall's edge has no centre) and the top row runs along it."""
+    from mapping.evaluate import area_recall, false_safe
+
+    wall, result = _scanned("drywall_studs", "adaptive")
+    pipe = np.asarray(wall.by_id("pipe-plastic").points_m, dtype=np.float64)
+    lines = [o for o in result.objects if o.kind == "line" and o.cls == "non_metal"]
+    assert len(lines) == 1
+    ends = np.asarray(lines[0].points_m)
+    assert _gap_m(ends, pipe) < 0.003 and float(np.ptp(ends[:, 1])) > 0.9  # the 1.1 m pipe's measured run
+    cavity = np.asarray(wall.by_id("cavity-1").geometry_m, dtype=np.float64)
+    cavities = [o for o in result.objects if o.cls == "cavity"]
+    assert cavities and all(_inside_or_near(o.points_m[:-1], cavity, CAP_FOOTPRINT_SIGMA_M).all() for o in cavities)
+    metal = [np.asarray(o.geometry_m, dtype=np.float64) for o in wall.objects
+             if o.kind in ("cable", "stud") or (o.kind == "pipe" and o.is_metal)]
+    for o in (o for o in result.objects if o.cls == "non_metal"):
+        assert all(_gap_m(o.points_m, m) > 0.04 for m in metal)
+    assert area_recall(result.objects, wall) == (3, 4, ["beam-1"])
+    assert false_safe(result.mapped_objects(), result.coverage, wall).share == 0.0
