@@ -3,7 +3,6 @@ and on OpenCV's real sample images against cv2.calibrateCamera on OpenCV's own c
 
 from __future__ import annotations
 
-import glob
 import json
 from pathlib import Path
 
@@ -11,6 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
+from arproj.bench.calibration import REAL_BOARD, SINGLE_CAMERA_TOLERANCE, opencv_corners, single_camera_comparison
 from arproj.cli.calibrate import camera_command
 from calibration.boards import BoardView, parse_board
 from calibration.stereo import calibrate_camera
@@ -73,44 +73,26 @@ def test_camera_command_bad_input(tmp_path: Path) -> None:
         camera_command(str(tmp_path / "none*.png"), "chessboard:9x6:25", tmp_path / "out", "k1k2", False)
 
 
-def _opencv_corners(files: list[str]) -> tuple[list[BoardView], float]:
-    """OpenCV's own pipeline (as its calibration sample): corners refined in an 11x11 window, calibrateCamera."""
-    board = parse_board("chessboard:9x6:0.025")
-    obj = board.object_points().astype(np.float32)
-    views, objs, imgs = [], [], []
-    size = (0, 0)
-    for f in files:
-        gray = cv2.imread(f, cv2.IMREAD_GRAYSCALE)
-        size = (gray.shape[1], gray.shape[0])
-        found, c = cv2.findChessboardCorners(gray, (9, 6), flags=cv2.CALIB_CB_ADAPTIVE_THRESH
-                                             | cv2.CALIB_CB_NORMALIZE_IMAGE)
-        if not found:
-            continue
-        c = cv2.cornerSubPix(gray, c, (11, 11), (-1, -1), (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER,
-                                                           30, 0.01))
-        objs.append(obj)
-        imgs.append(c)
-        views.append(BoardView(c.reshape(-1, 2).astype(np.float64), board.object_points(), np.arange(54), size, f))
-    rms, *_ = cv2.calibrateCamera(objs, imgs, size, None, None)
-    return views, float(rms)
-
-
 @pytest.mark.realdata
 def test_real_left_images_match_opencv_calibrate_camera(shared_data: Path, tmp_path: Path) -> None:
     folder = shared_data / "opencv-stereo-chessboard"
     if not folder.is_dir():
         pytest.skip(f"{folder} is absent")
-    files = sorted(glob.glob(str(folder / "left*.jpg")))
-    views, cv_rms = _opencv_corners(files)
+    files = sorted(folder.glob("left*.jpg"))
+    rms = single_camera_comparison(folder)
+    cv_rms = rms["opencv calibrateCamera"]
+    assert abs(cv_rms - 0.408) < 0.005  # the data's README (mono 0.408 px): the peer is run as documented
     # On OpenCV's corners, with every view kept, arproj's single-camera calibration is OpenCV's: the same RMS
-    # within 1 % (the issue's target; the data's README: mono 0.408 px).
-    ours_on_cv = calibrate_camera(views, reject_outliers=False)
-    assert abs(ours_on_cv.rms_px / cv_rms - 1) < 0.01
+    # within 1 % (the issue's target).
+    assert abs(rms["arproj on OpenCV's corners"] / cv_rms - 1) < SINGLE_CAMERA_TOLERANCE
     # With outlier rejection on, the view whose 11x11-window corners went astray is the one dropped.
-    assert [Path(s).name for s, _ in calibrate_camera(views).rejected] == ["left02.jpg"]
+    board = parse_board(REAL_BOARD)
+    views = [v for v in (opencv_corners(board, f) for f in files) if v is not None]
+    ours_on_cv = calibrate_camera(views)
+    assert [Path(s).name for s, _ in ours_on_cv.rejected] == ["left02.jpg"]
     # End to end on the files, arproj's own corners fit better than OpenCV's 11x11-window corners.
-    summary = camera_command(str(folder / "left*.jpg"), "chessboard:9x6:0.025", tmp_path / "out", "k1k2p1p2k3",
-                             True)
+    summary = camera_command(str(folder / "left*.jpg"), REAL_BOARD, tmp_path / "out", "k1k2p1p2k3", True)
     assert summary["views_used"] == len(files) and summary["reprojection_rms_px"] < cv_rms
+    assert abs(summary["reprojection_rms_px"] - rms["arproj"]) < 1e-3  # the bench row is the command's figure
     est = read_camera_info(tmp_path / "out" / "camera.yaml")
     assert abs(est.fx / ours_on_cv.intrinsics.fx - 1) < 0.01  # the two corner sets agree on the focal length
