@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from calibration.defaults import DEFAULT_BOARD as DEFAULT_BOARD  # re-exported
 from geometry.errors import InputError
 
 # Subpixel refinement: half-window = this fraction of the local corner spacing, clipped to the range below.
@@ -27,6 +28,10 @@ SUBPIX_WINDOW_FRACTION = 0.25
 SUBPIX_MIN_HALF_WINDOW = 2
 SUBPIX_MAX_HALF_WINDOW = 15
 SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_MAX_ITER | cv2.TERM_CRITERIA_EPS, 100, 1e-4)
+
+# Squares above this are implausible for a printed board: the size was most likely typed in mm or cm.
+MAX_SQUARE_M = 0.3
+MIN_SQUARE_M = 0.003
 
 
 @dataclass(frozen=True)
@@ -84,6 +89,17 @@ class Board:
         return img
 
 
+def _check_square_size(spec: str, text: str, square: float) -> None:
+    """InputError for a square over MAX_SQUARE_M, suggesting the readings as millimetres or centimetres."""
+    if square <= MAX_SQUARE_M:
+        return
+    readings = [f"{square / div:g} m ({text} {unit})" for div, unit in ((1000, "mm"), (100, "cm"))
+                if MIN_SQUARE_M <= square / div <= MAX_SQUARE_M]
+    guess = f"did you mean {' or '.join(readings)}?" if readings else "give the square size in metres"
+    raise InputError(f"board spec {spec!r}: a {square:g} m square is implausible for a printed board (over "
+                     f"{MAX_SQUARE_M:g} m); {guess}", "the square size is in metres, e.g. chessboard:9x6:0.025")
+
+
 def parse_board(spec: str) -> Board:
     """Board from 'chessboard:COLSxROWS:SQUARE_M' or 'charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT]'."""
     parts = str(spec).strip().split(":")
@@ -98,6 +114,7 @@ def parse_board(spec: str) -> Board:
                          hint) from None
     if cols < 2 or rows < 2 or not square > 0:
         raise InputError(f"board spec {spec!r}: needs at least 2x2 corners and a positive square size", hint)
+    _check_square_size(spec, parts[2], square)
     if parts[0] == "chessboard":
         if len(parts) != 3:
             raise InputError(f"board spec {spec!r}: a chessboard takes exactly COLSxROWS:SQUARE_M", hint)

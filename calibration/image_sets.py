@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import glob
+import hashlib
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,38 @@ def expand(pattern: str, what: str) -> list[Path]:
     return files
 
 
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def check_distinct_pairs(left_files: list[Path], right_files: list[Path]) -> None:
+    """InputError when a left and a right image are the same file or the same bytes (the same glob twice, or
+    one camera's images copied): the pair would calibrate to a zero baseline."""
+    for lf, rf in zip(left_files, right_files, strict=True):
+        same_path = lf.resolve() == rf.resolve()
+        if same_path or (lf.stat().st_size == rf.stat().st_size and _digest(lf) == _digest(rf)):
+            how = "the same file" if same_path else "identical files"
+            raise InputError(f"--left {lf} and --right {rf} are {how}: a stereo pair needs one image from each "
+                             "camera", "point --left and --right at the two cameras' images")
+
+
+@dataclass
+class ImageSet:
+    """One camera's detections (None where the board was not found) and the files without a board."""
+
+    files: list[Path]
+    views: list[BoardView | None]
+    no_board: list[str] = field(default_factory=list)
+
+
+def detect_image_set(pattern: str, board: Board, what: str = "--images",
+                     track: Tracker = _plain_iter) -> ImageSet:
+    """Detect the board in every image matching pattern (sorted by name)."""
+    files = expand(pattern, what)
+    views = [detect_file(board, f) for f in track(files, "finding the board", len(files))]
+    return ImageSet(files, views, [str(f) for f, v in zip(files, views, strict=True) if v is None])
+
+
 @dataclass
 class StereoImageSet:
     """Aligned detections (None where the board was not found) and the files without a board."""
@@ -49,6 +82,7 @@ def detect_stereo_set(left_pattern: str, right_pattern: str, board: Board,
         raise InputError(f"{len(left_files)} left images ({left_pattern}) but {len(right_files)} right images "
                          f"({right_pattern})", "give exactly one right image per left image; pairs are matched "
                          "by sorted file name")
+    check_distinct_pairs(left_files, right_files)
     both = list(zip(left_files, right_files, strict=True))
     left: list[BoardView | None] = []
     right: list[BoardView | None] = []

@@ -41,6 +41,8 @@ from geometry.triangulation import triangulate
 # --- tolerances, in one place ------------------------------------------------------------------------------
 GRAY_MIN_CONTRAST = 4.0  # grey levels between a pattern and its inverse for a bit to count as decoded
 SHADOW_MIN_CONTRAST = 15.0  # white minus black: less means the projector does not reach the pixel
+SIZE_CHECK_BEYOND_FRACTION = 0.02  # decoded pixels outside the given size: beyond this share, warn
+SIZE_CHECK_MIN_PIXELS = 500  # too few decoded pixels say nothing about the size
 HOMOGRAPHY_HALF_WINDOW_FRACTION = 0.5  # Moreno-Taubin window half-size, as a fraction of the square in pixels
 HOMOGRAPHY_MIN_HALF_WINDOW = 6
 HOMOGRAPHY_MAX_HALF_WINDOW = 40
@@ -76,15 +78,9 @@ def gray_code_bits(width: int, height: int) -> tuple[int, int]:
     return int(np.ceil(np.log2(width))), int(np.ceil(np.log2(height)))
 
 
-def decode_gray_code(captures: list[NDArray] | NDArray, projector_size: tuple[int, int],
-                     min_contrast: float = GRAY_MIN_CONTRAST,
-                     shadow_contrast: float = SHADOW_MIN_CONTRAST) -> NDArray[np.float64]:
-    """Projector pixel (column, row) seen by every camera pixel; NaN where undecodable.
-
-    captures: the camera images in pattern order (Gray code pairs, white, black), each (h, w) grey.
-    Returns (h, w, 2) float64. Same decoding as GrayCodePattern.getProjPixel (bit = pattern > inverse),
-    vectorised; pixels in shadow or with too little contrast in any bit are NaN.
-    """
+def _decode_codes(captures: list[NDArray] | NDArray, projector_size: tuple[int, int], min_contrast: float,
+                  shadow_contrast: float) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
+    """(column code, row code, decodable) per camera pixel, before the codes are checked against the size."""
     width, height = projector_size
     n_col, n_row = gray_code_bits(width, height)
     expected = 2 * (n_col + n_row) + 2
@@ -111,10 +107,46 @@ def decode_gray_code(captures: list[NDArray] | NDArray, projector_size: tuple[in
 
     col = decode(0, n_col)
     row = decode(2 * n_col, n_row)
+    return col, row, valid
+
+
+def decode_gray_code(captures: list[NDArray] | NDArray, projector_size: tuple[int, int],
+                     min_contrast: float = GRAY_MIN_CONTRAST,
+                     shadow_contrast: float = SHADOW_MIN_CONTRAST) -> NDArray[np.float64]:
+    """Projector pixel (column, row) seen by every camera pixel; NaN where undecodable.
+
+    captures: the camera images in pattern order (Gray code pairs, white, black), each (h, w) grey.
+    Returns (h, w, 2) float64. Same decoding as GrayCodePattern.getProjPixel (bit = pattern > inverse),
+    vectorised; pixels in shadow or with too little contrast in any bit are NaN.
+    """
+    width, height = projector_size
+    col, row, valid = _decode_codes(captures, projector_size, min_contrast, shadow_contrast)
     valid &= (col < width) & (row < height)
     out = np.stack([col, row], axis=-1).astype(np.float64)
     out[~valid] = np.nan
     return out
+
+
+def projector_size_warning(captures: list[NDArray] | NDArray, projector_size: tuple[int, int],
+                           min_contrast: float = GRAY_MIN_CONTRAST,
+                           shadow_contrast: float = SHADOW_MIN_CONTRAST) -> str | None:
+    """A warning when the decoded codes do not fit the given size: column codes span the width and row codes
+    the height, so codes beyond one but inside the other mean WIDTHxHEIGHT was given height first."""
+    width, height = projector_size
+    col, row, valid = _decode_codes(captures, projector_size, min_contrast, shadow_contrast)
+    if valid.sum() < SIZE_CHECK_MIN_PIXELS:
+        return None
+    beyond = float(np.mean((col[valid] >= width) | (row[valid] >= height)))
+    if beyond < SIZE_CHECK_BEYOND_FRACTION:
+        return None
+    # A high percentile, not the maximum: a few misdecoded pixels reach any code.
+    col_span = int(np.percentile(col[valid], 99.5)) + 1
+    row_span = int(np.percentile(row[valid], 99.5)) + 1
+    what = (f"{100 * beyond:.0f} % of the decoded pixels lie outside a {width}x{height} projector (column codes "
+            f"up to {col_span}, row codes up to {row_span})")
+    if col_span <= height and row_span <= width:
+        return f"--projector {width}x{height} looks swapped: {what}; did you mean {height}x{width} (WIDTHxHEIGHT)?"
+    return f"{what}: check --projector (WIDTHxHEIGHT)"
 
 
 def _fit_homography(src: NDArray[np.float64], dst: NDArray[np.float64]) -> NDArray[np.float64] | None:
@@ -400,6 +432,10 @@ def calibrate_projector_with_board(board: Board, captures: list[BoardCaptures], 
     cam_views: list[BoardView] = []
     proj_views: list[BoardView] = []
     warnings: list[str] = []
+    # The first pose suffices: the size is the same at every pose.
+    size_warning = projector_size_warning(captures[0].images, projector_size) if captures else None
+    if size_warning is not None:
+        warnings.append(size_warning)
     for cap in track(captures, "decoding Gray code", len(captures)):
         cv_, pv = board_corners_in_projector(board, cap, projector_size)
         if cv_ is None:

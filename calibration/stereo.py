@@ -56,6 +56,20 @@ class CameraCalibration:
     rejected: list[tuple[str, float]] = field(default_factory=list)  # (source, rms px)
     distortion_model: str = DEFAULT_MODEL
 
+    def quality(self) -> dict:
+        """The figures `arproj calibrate camera` writes and prints, laid out as the stereo command's."""
+        return {
+            "reprojection_rms_px": round(self.rms_px, 4),
+            "views_used": len(self.views),
+            "views_rejected": [{"view": source, "rms_px": round(rms, 4),
+                                "why": f"view RMS {rms:.3f} px above {OUTLIER_FACTOR:g}x the median view RMS "
+                                       f"and above {OUTLIER_MIN_PX:g} px"} for source, rms in self.rejected],
+            "distortion_model": self.distortion_model,
+            "per_view_rms_px": {Path(v.source).name: round(r, 4) for v, r in
+                                zip(self.views, self.per_view_rms_px, strict=True)},
+            "coverage": coverage_report(self.views, self.T_camera_from_board),
+        }
+
 
 @dataclass
 class StereoCalibration:

@@ -7,6 +7,10 @@ and the two-stage pipeline (calibrateCamera per camera, stereoCalibrate with FIX
 OpenCV's corners (findChessboardCorners + cornerSubPix 11x11, as the sample does). Rows "on arproj corners"
 separate what the corner refinement gains from what the joint calibration gains.
 
+Single camera (the left images alone): cv2.calibrateCamera on OpenCV's corners against arproj's
+calibrate_camera on the same corners (every view kept: the target is the same RMS within 1 %) and arproj end to
+end (its own corners, outlier views dropped), as `arproj calibrate camera` runs it.
+
 Simulated site (arproj.sim, seed): the wizard's four steps; each recovered quantity against the truth.
 """
 
@@ -22,9 +26,9 @@ import cv2
 import numpy as np
 
 from arproj.bench import BenchTable, cells, column, columns
-from calibration.boards import Board, BoardView, parse_board, read_gray
+from calibration.boards import Board, BoardView, detect_file, parse_board, read_gray
 from calibration.epipolar import evaluate_pairs
-from calibration.stereo import calibrate_stereo, pair_views
+from calibration.stereo import calibrate_camera, calibrate_stereo, pair_views
 from geometry.intrinsics import Intrinsics
 from geometry.poses import make_pose
 
@@ -93,6 +97,24 @@ def opencv_two_stage_pipeline(pairs: list[tuple[BoardView, BoardView]], size: tu
 def _arproj_pipeline(pairs: list[tuple[BoardView, BoardView]], board: Board) -> tuple:
     c = calibrate_stereo([lv for lv, _ in pairs], [rv for _, rv in pairs], board)
     return c.rms_px, c.left, c.right, c.T_right_from_left
+
+
+SINGLE_CAMERA_TOLERANCE = 0.01  # arproj on OpenCV's corners = calibrateCamera within this relative RMS
+
+
+def single_camera_comparison(folder: Path) -> dict[str, float]:
+    """RMS (px) on the left images alone: cv2.calibrateCamera on OpenCV's corners, arproj's calibrate_camera on
+    the same corners with every view kept (the same k1 k2 p1 p2 k3 model), and arproj end to end."""
+    board = parse_board(REAL_BOARD)
+    files = sorted(folder.glob("left*.jpg"))
+    cv_views = [v for v in (opencv_corners(board, f) for f in files) if v is not None]
+    rms, *_ = cv2.calibrateCamera([v.object_points.astype(np.float32) for v in cv_views],
+                                  [v.image_points.astype(np.float32).reshape(-1, 1, 2) for v in cv_views],
+                                  cv_views[0].image_size, None, None)
+    on_cv = calibrate_camera(cv_views, reject_outliers=False)
+    own = calibrate_camera([v for v in (detect_file(board, f) for f in files) if v is not None])
+    return {"opencv calibrateCamera": float(rms), "arproj on OpenCV's corners": on_cv.rms_px,
+            "arproj": own.rms_px, "arproj views rejected": float(len(own.rejected))}
 
 
 class HeldOut(NamedTuple):
@@ -225,6 +247,19 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
             headline[label] = {"arproj": round(ours, 4), "peer": round(peer, 4),
                                "peer_name": f"best OpenCV pipeline ({best_peer})", "unit": " px",
                                "target": "≤ best OpenCV pipeline", "met": ours <= peer}
+        mono = single_camera_comparison(folder)
+        cv_rms, on_cv = mono["opencv calibrateCamera"], mono["arproj on OpenCV's corners"]
+        same = abs(on_cv / cv_rms - 1) <= SINGLE_CAMERA_TOLERANCE
+        rows.append(CalibrationRow("real single camera (left): opencv calibrateCamera", rms_px=cv_rms))
+        rows.append(CalibrationRow("real single camera (left): arproj on OpenCV's corners", rms_px=on_cv,
+                                   error=f"{100 * (on_cv / cv_rms - 1):+.2f} %",
+                                   target=f"= calibrateCamera ± {100 * SINGLE_CAMERA_TOLERANCE:g} %",
+                                   met_or_time="yes" if same else "NO"))
+        rows.append(CalibrationRow("real single camera (left): arproj", rms_px=mono["arproj"],
+                                   met_or_time=f"{mono['arproj views rejected']:.0f} view(s) rejected"))
+        headline["single camera RMS px (OpenCV's corners)"] = {
+            "arproj": round(on_cv, 4), "peer": round(cv_rms, 4), "peer_name": "cv2.calibrateCamera",
+            "unit": " px", "target": f"within {100 * SINGLE_CAMERA_TOLERANCE:g} %", "met": same}
     else:
         notes.append("real images not found (../shared/data/opencv-stereo-chessboard): real-data rows skipped")
 

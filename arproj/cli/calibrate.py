@@ -2,6 +2,7 @@
 
     arproj calibrate [--sim] [--out DIR] [--restart] [--stop-after STEP]   the wizard, resumable
     arproj calibrate stereo --left 'DIR/left*.jpg' --right 'DIR/right*.jpg' --board chessboard:9x6:0.025 --out RIG
+    arproj calibrate camera --images 'DIR/left*.jpg' --board chessboard:9x6:0.025 --out DIR
     arproj calibrate projector --captures 'DIR/capture_*' --projector 1920x1080 --board chessboard:9x7:0.075 --out DIR
 """
 
@@ -9,11 +10,20 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from arproj.console import console, err_console, progress_bar, track
+from calibration.defaults import DEFAULT_BOARD
 from geometry.errors import InputError
+
+if TYPE_CHECKING:
+    from calibration.boards import Board
+
+BOARD_HELP = ("Board spec: chessboard:COLSxROWS:SQUARE_M (inner corners) or "
+              "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT]; the square size in metres.")
+MODEL_HELP = "Distortion model: k1k2, k1k2k3, k1k2p1p2, k1k2p1p2k3."
 
 
 def _parse_size(text: str, option: str) -> tuple[int, int]:
@@ -36,10 +46,7 @@ def stereo_command(left: str, right: str, board_spec: str, out: Path, model: str
 
     board = parse_board(board_spec)
     images = detect_stereo_set(left, right, board, track=lambda it, d, n: track(it, d, total=n))
-    for name in images.no_board:
-        err_console.print(f"[yellow]warning:[/] no {board.cols}x{board.rows} board found in {name} "
-                          "(skipped; check the board is fully in view, sharp and the size is right)",
-                          highlight=False)
+    _warn_no_board(images.no_board, board)
     try:
         calib = calibrate_stereo(images.left, images.right, board, model=model)
     except InputError as err:
@@ -74,10 +81,57 @@ def stereo_command(left: str, right: str, board_spec: str, out: Path, model: str
         console.print(f"  reprojection RMS {summary['reprojection_rms_px']:.3f} px, epipolar error "
                       f"{summary['epipolar_error_px_per_image']:.3f} px per image, baseline "
                       f"{1000 * summary['baseline_m']:.2f} mm", highlight=False)
-        for name in summary["pairs_rejected"]:
-            console.print(f"  rejected as outlier: {name}", highlight=False)
-        for line in summary["advice"]:
-            console.print(f"  next: {line}", highlight=False)
+        _print_rejected_and_advice(summary["pairs_rejected"], summary["advice"])
+    return summary
+
+
+def _print_rejected_and_advice(rejected: list[str], advice: list[str]) -> None:
+    for name in rejected:
+        console.print(f"  rejected as outlier: {name}", highlight=False)
+    for line in advice:
+        console.print(f"  next: {line}", highlight=False)
+
+
+def _warn_no_board(names: list[str], board: Board) -> None:
+    for name in names:
+        err_console.print(f"[yellow]warning:[/] no {board.cols}x{board.rows} board found in {name} "
+                          "(skipped; check the board is fully in view, sharp and the size is right)",
+                          highlight=False)
+
+
+def camera_command(images: str, board_spec: str, out: Path, model: str, as_json: bool) -> dict:
+    """Calibrate one camera from image files: writes OUT/camera.yaml and OUT/camera_quality.json."""
+    from calibration.boards import parse_board
+    from calibration.image_sets import detect_image_set
+    from calibration.stereo import calibrate_camera, coverage_advice
+    from geometry.intrinsics import write_camera_info
+
+    board = parse_board(board_spec)
+    found = detect_image_set(images, board, track=lambda it, d, n: track(it, d, total=n))
+    _warn_no_board(found.no_board, board)
+    try:
+        calib = calibrate_camera([v for v in found.views if v is not None], model=model)
+    except InputError as err:
+        if found.no_board:
+            raise InputError(f"{err.message} (no board in: {', '.join(found.no_board)})", err.hint) from None
+        raise
+    figures = calib.quality() | {"board": board_spec, "images_without_board": found.no_board}
+    out.mkdir(parents=True, exist_ok=True)
+    write_camera_info(out / "camera.yaml", calib.intrinsics, camera_name="camera")
+    (out / "camera_quality.json").write_text(json.dumps(figures, indent=2))
+    intr = calib.intrinsics
+    summary = figures | {"out": str(out), "advice": coverage_advice(figures["coverage"]),
+                         "camera": {"fx": intr.fx, "fy": intr.fy, "cx": intr.cx, "cy": intr.cy,
+                                    "dist": list(intr.dist)}}
+    if as_json:
+        print(json.dumps(summary, indent=2))
+    else:
+        console.print(f"camera calibration of {figures['views_used']} views → {out / 'camera.yaml'}",
+                      highlight=False)
+        console.print(f"  reprojection RMS {figures['reprojection_rms_px']:.3f} px, fx {intr.fx:.1f} fy "
+                      f"{intr.fy:.1f} cx {intr.cx:.1f} cy {intr.cy:.1f}", highlight=False)
+        _print_rejected_and_advice([f"{r['view']} ({r['why']})" for r in figures["views_rejected"]],
+                                   summary["advice"])
     return summary
 
 
@@ -141,22 +195,33 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     def stereo(
         left: str = typer.Option(..., "--left", help="Glob of the left images, e.g. 'DIR/left*.jpg' (quoted)."),
         right: str = typer.Option(..., "--right", help="Glob of the right images; paired by sorted name."),
-        board: str = typer.Option("chessboard:9x6:0.025", "--board", help="Board spec: chessboard:COLSxROWS:"
-                                  "SQUARE_M (inner corners) or charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT]."),
+        board: str = typer.Option(DEFAULT_BOARD, "--board", help=BOARD_HELP),
         out: Path = typer.Option(..., "--out", help="Rig folder: camera_left.yaml, camera_right.yaml, rig.yaml."),
-        model: str = typer.Option("k1k2p1p2k3", "--model", help="Distortion model: k1k2, k1k2k3, k1k2p1p2, "
-                                  "k1k2p1p2k3."),
+        model: str = typer.Option("k1k2p1p2k3", "--model", help=MODEL_HELP),
         as_json: bool = typer.Option(False, "--json", help="Print the quality figures as JSON."),
     ) -> None:
         """Stereo calibration from image files; writes ROS camera_info files and the rig file."""
         stereo_command(left, right, board, out, model, as_json)
+
+    @calibrate_app.command("camera")
+    def camera(
+        images: str = typer.Option(..., "--images", help="Glob of one camera's images, e.g. 'DIR/left*.jpg' "
+                                   "(quoted)."),
+        board: str = typer.Option(DEFAULT_BOARD, "--board", help=BOARD_HELP),
+        out: Path = typer.Option(..., "--out", help="Folder for camera.yaml (ROS camera_info) and "
+                                 "camera_quality.json."),
+        model: str = typer.Option("k1k2p1p2k3", "--model", help=MODEL_HELP),
+        as_json: bool = typer.Option(False, "--json", help="Print the quality figures as JSON."),
+    ) -> None:
+        """Calibrate one camera from image files (chessboard or ChArUco); writes a ROS camera_info file."""
+        camera_command(images, board, out, model, as_json)
 
     @calibrate_app.command("capture")
     def capture(
         left_camera: str = typer.Option(..., "--left-camera", help="Left camera: an index (0), a video file or "
                                         "a stream URL (anything cv2.VideoCapture opens)."),
         right_camera: str = typer.Option(..., "--right-camera", help="Right camera, likewise."),
-        board: str = typer.Option("chessboard:9x6:0.025", "--board", help="Board spec, as for `stereo`."),
+        board: str = typer.Option(DEFAULT_BOARD, "--board", help="Board spec, as for `stereo`."),
         out: Path = typer.Option(..., "--out", help="Folder for left_NN.png / right_NN.png."),
         pairs: int = typer.Option(20, "--pairs", min=1, help="Stop after this many new views of the board."),
         max_frames: int = typer.Option(3000, "--max-frames", min=1, help="Give up after this many frames."),

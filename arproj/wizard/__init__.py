@@ -19,18 +19,22 @@ from pathlib import Path
 from typing import Any
 
 from arproj.console import console, track
+from calibration.boards import parse_board
+from calibration.defaults import DEFAULT_BOARD
 from geometry.errors import InputError
 from geometry.plain import plain
 from geometry.rig import RIG_FILE, Rig
 
+_BOARD = parse_board(DEFAULT_BOARD)
 STATE_FILE = "wizard_state.json"
 STEPS = ("stereo", "projector", "head", "validation")
 
 INSTRUCTIONS = {
-    "stereo": "Print a chessboard (e.g. 9x6 inner corners, 80 mm squares). Take 12-20 pairs with both cameras: "
+    "stereo": f"Print a chessboard ({_BOARD.cols}x{_BOARD.rows} inner corners, {1000 * _BOARD.square_m:g} mm "
+              "squares). Take 12-20 pairs with both cameras: "
               "the board filling each image region (corners and centre) and turned left/right and tilted "
               "up/down by 20-45°. Then run: arproj calibrate stereo --left 'DIR/left*.png' --right "
-              "'DIR/right*.png' --board chessboard:9x6:0.08 --out OUT",
+              f"'DIR/right*.png' --board {DEFAULT_BOARD} --out OUT",
     "projector": "With the stereo rig calibrated, project the Gray code (or a chessboard) onto the wall at "
                  "≥ 3 head poses turned ≥ 15° apart (a flat wall seen from one pose cannot fix the "
                  "projector's focal length); or capture a printed board at ≥ 3 tilted poses and run: arproj "

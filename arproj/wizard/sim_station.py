@@ -13,11 +13,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from calibration.boards import Board, BoardView, detect
+from calibration.defaults import DEFAULT_BOARD
 from geometry.head import HeadModel
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, make_pose, rotation_about, transform_points
 
-STEREO_BOARD = "chessboard:9x6:0.08"
+STEREO_BOARD = DEFAULT_BOARD  # the board the wizard tells a person to print
 HEAD_APPROACH_DEG = 2.0  # every commanded angle is approached from below, so backlash is the same each time
 DEFAULT_DISTANCE_M = 2.0  # validation target: ≤ 1 mm RMS at 2 m
 Z0, ZSPAN = 1.35, 0.45

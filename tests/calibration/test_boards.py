@@ -1,5 +1,7 @@
 """Board specs and subpixel detection against rendered boards with known corner positions."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -27,6 +29,17 @@ def test_parse_chessboard_and_charuco() -> None:
 def test_bad_specs_raise_input_error_naming_the_spec(spec: str) -> None:
     with pytest.raises(InputError, match="board spec"):
         parse_board(spec)
+
+
+@pytest.mark.parametrize(("spec", "suggestion"), [("chessboard:9x6:25", "did you mean 0.025 m (25 mm)"),
+                                                  ("charuco:7x5:40:30", "did you mean 0.04 m (40 mm)"),
+                                                  ("chessboard:9x6:8", "0.008 m (8 mm) or 0.08 m (8 cm)"),
+                                                  ("chessboard:9x6:0.5", "did you mean 0.005 m (0.5 cm)"),
+                                                  ("chessboard:9x6:2000", "give the square size in metres")])
+def test_implausible_square_size_suggests_metres(spec: str, suggestion: str) -> None:
+    with pytest.raises(InputError, match=re.escape(suggestion)):
+        parse_board(spec)
+    assert parse_board("chessboard:9x6:0.3").square_m == 0.3  # the limit itself is accepted
 
 
 def test_subpixel_corners_match_the_rendered_truth() -> None:

@@ -13,6 +13,7 @@ from calibration.projector import (
     calibrate_projector_with_board,
     decode_gray_code,
     gray_code_patterns,
+    projector_size_warning,
 )
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
@@ -55,6 +56,18 @@ def test_vectorised_decoding_matches_opencv_get_proj_pixel(board_captures: list[
         error, pixel = gray.getProjPixel(patterns, int(x), int(y))
         assert not error
         assert tuple(pixel) == (int(decoded[y, x, 0]), int(decoded[y, x, 1]))
+
+
+def test_projector_size_given_height_first_is_warned(board_captures: list[BoardCaptures]) -> None:
+    images = board_captures[0].images
+    assert projector_size_warning(images, PROJ_SIZE) is None
+    # 160x256 has the same Gray-code bit counts as 256x160, so the capture count cannot tell them apart;
+    # the decoded column codes (up to 255) reaching past a width of 160 do.
+    warning = projector_size_warning(images, (PROJ_SIZE[1], PROJ_SIZE[0]))
+    assert warning is not None and "looks swapped" in warning and "did you mean 256x160" in warning
+    # Too small in one direction only: not a swap, but still a warning to check --projector.
+    warning = projector_size_warning(images, (200, 160))
+    assert warning is not None and "looks swapped" not in warning and "check --projector" in warning
 
 
 def test_wrong_number_of_captures_is_an_input_error() -> None:

@@ -43,6 +43,24 @@ def chessboard_albedo(board: Board, margin_squares: float = 1.0) -> Albedo:
     return albedo
 
 
+def texture_albedo(board: Board, pixels_per_square: int = 40, margin_squares: float = 1.0) -> Albedo:
+    """Albedo of the board's printable image (Board.render; ChArUco too), placed like chessboard_albedo: corner
+    id 0 at the board origin, one square plus the margin in from the image's top-left; grey beyond."""
+    texture = board.render(pixels_per_square, margin_squares)
+    a_img = np.where(texture > 127, WHITE_ALBEDO, BLACK_ALBEDO)
+    offset = (1 + margin_squares) * pixels_per_square
+    s = board.square_m
+
+    def albedo(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+        i = np.floor(x / s * pixels_per_square + offset).astype(np.int64)
+        j = np.floor(y / s * pixels_per_square + offset).astype(np.int64)
+        inside = (i >= 0) & (i < texture.shape[1]) & (j >= 0) & (j < texture.shape[0])
+        return np.where(inside, a_img[np.clip(j, 0, texture.shape[0] - 1), np.clip(i, 0, texture.shape[1] - 1)],
+                        BACKGROUND_ALBEDO)
+
+    return albedo
+
+
 def uniform_albedo(value: float = WHITE_ALBEDO) -> Albedo:
     """A bare wall."""
     return lambda x, y: np.full(np.shape(x), value)

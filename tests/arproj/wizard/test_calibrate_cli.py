@@ -105,6 +105,38 @@ def test_bad_inputs_name_the_files(arproj: Callable[..., Done], stereo_folder: P
     assert done.returncode == 2 and "no files match" in done.stderr
 
 
+def test_stereo_refuses_identical_left_and_right(arproj: Callable[..., Done], tmp_path: Path) -> None:
+    images = tmp_path / "images"
+    images.mkdir()
+    for k in range(4):
+        img = np.random.default_rng(k).integers(0, 255, (60, 80), dtype=np.uint8)
+        cv2.imwrite(str(images / f"left{k}.png"), img)
+        cv2.imwrite(str(images / f"right{k}.png"), img)  # the same bytes under another name
+    out = str(tmp_path / "out")
+    done = arproj("calibrate", "stereo", "--left", str(images / "left*.png"), "--right", str(images / "left*.png"),
+                  "--out", out)
+    assert done.returncode == 2 and "are the same file" in done.stderr and "left0.png" in done.stderr
+    done = arproj("calibrate", "stereo", "--left", str(images / "left*.png"), "--right", str(images / "right*.png"),
+                  "--out", out)
+    assert done.returncode == 2 and "are identical files" in done.stderr and "right0.png" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_board_square_in_millimetres_is_refused(arproj: Callable[..., Done], tmp_path: Path) -> None:
+    done = arproj("calibrate", "camera", "--images", str(tmp_path / "*.png"), "--board", "chessboard:9x6:25",
+                  "--out", str(tmp_path / "out"))
+    assert done.returncode == 2 and "did you mean 0.025 m" in done.stderr
+
+
+def test_wizard_and_board_options_share_one_default_board() -> None:
+    from arproj.wizard import INSTRUCTIONS
+    from arproj.wizard.sim_station import STEREO_BOARD
+    from calibration.defaults import DEFAULT_BOARD
+
+    assert STEREO_BOARD == DEFAULT_BOARD and f"--board {DEFAULT_BOARD}" in INSTRUCTIONS["stereo"]
+    assert "80 mm squares" in INSTRUCTIONS["stereo"] and DEFAULT_BOARD.endswith(":0.08")
+
+
 def test_projector_command_bad_inputs(arproj: Callable[..., Done], tmp_path: Path) -> None:
     done = arproj("calibrate", "projector", "--captures", str(tmp_path / "capture_*"), "--projector", "1280x800",
                   "--out", str(tmp_path / "out"))
