@@ -30,30 +30,29 @@ def test_bad_specs_raise_input_error_naming_the_spec(spec: str) -> None:
         parse_board(spec)
 
 
-def test_subpixel_corners_match_the_rendered_truth() -> None:
+def _rendered_board(distance_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """A 9x6 board of 30 mm squares rendered tilted at distance_m, and its true corners (n, 2) px."""
     board = parse_board("chessboard:9x6:0.03")
     cam = Intrinsics(600.0, 600.0, 319.5, 239.5, 640, 480, (-0.05, 0.01, 0.0, 0.0, 0.0))
     R = rotation_about([1, 0.4, 0], np.radians(25))
-    T = make_pose(R, np.array([0.0, 0.0, 0.75]) - R @ np.array([0.12, 0.075, 0.0]))
+    T = make_pose(R, np.array([0.0, 0.0, distance_m]) - R @ np.array([0.12, 0.075, 0.0]))
     img = PlaneRenderer(cam, T, chessboard_albedo(board), supersample=4).render(
         None, np.random.default_rng(0), ambient=250.0, noise=1.0)
-    view = detect(board, img)
+    return img, cam.project(transform_points(T, board.object_points()))
+
+
+def test_subpixel_corners_match_the_rendered_truth() -> None:
+    img, truth = _rendered_board(0.75)
+    view = detect(parse_board("chessboard:9x6:0.03"), img)
     assert view is not None
-    truth = cam.project(transform_points(T, board.object_points()))
     err = np.linalg.norm(view.image_points - truth, axis=1)
     assert np.sqrt(np.mean(err ** 2)) < CORNER_TOLERANCE_PX
 
 
 @pytest.fixture(scope="module")
 def small_squares() -> tuple[np.ndarray, np.ndarray]:
-    """A rendered 9x6 board with ~20 px squares and its true corners."""
-    board = parse_board("chessboard:9x6:0.03")
-    cam = Intrinsics(600.0, 600.0, 319.5, 239.5, 640, 480, (-0.05, 0.01, 0.0, 0.0, 0.0))
-    R = rotation_about([1, 0.4, 0], np.radians(25))
-    T = make_pose(R, np.array([0.0, 0.0, 0.9]) - R @ np.array([0.12, 0.075, 0.0]))
-    img = PlaneRenderer(cam, T, chessboard_albedo(board), supersample=4).render(
-        None, np.random.default_rng(0), ambient=250.0, noise=1.0)
-    return img, cam.project(transform_points(T, board.object_points()))
+    """Squares ~20 px wide: the adaptive half-window is 5 px."""
+    return _rendered_board(0.9)
 
 
 @pytest.mark.parametrize(("corner", "offset_px"), [(0, (-6.0, 2.0)), (0, (7.0, 0.0)), (13, (5.0, 3.0)),
