@@ -9,6 +9,13 @@ A rig folder holds `rig.yaml` plus one ROS camera_info YAML per device:
       T_robot_from_camera_left: [[...], ...]
     head: {model: product_of_exponentials, ...}       # optional, see geometry.head
     quality: {reprojection_rms_px: 0.21, ...}          # free-form figures from calibration
+
+With both cameras and T_camera_right_from_camera_left present, the two camera_info files carry the stereo
+rectification as ROS camera_calibration writes it (cv2.stereoRectify, alpha 0): rectification_matrix R is the
+rotation into the common rectified frame and projection_matrix P = [fx' 0 cx' Tx; 0 fy' cy' 0; 0 0 1 0] with
+Tx = -fx' * baseline for the right camera (0 for the left), so ROS stereo_image_proc sees the baseline.
+camera_matrix and distortion_coefficients stay the raw intrinsics and rig.yaml the raw extrinsics; reading
+ignores R and P, so rig folders written before (R = I, P = [K|0]) read the same.
 """
 
 from __future__ import annotations
@@ -16,8 +23,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 import yaml
+from numpy.typing import NDArray
 
 from geometry.errors import InputError
 from geometry.frames import parse_pose_name
@@ -27,6 +36,26 @@ from geometry.plain import plain
 from geometry.poses import invert
 
 RIG_FILE = "rig.yaml"
+STEREO_POSE = "T_camera_right_from_camera_left"
+# ROS camera_calibration's default: the rectified images keep only valid pixels (no black borders).
+RECTIFY_ALPHA = 0.0
+
+
+def stereo_rectification(left: Intrinsics, right: Intrinsics, T_right_from_left: NDArray[np.float64]
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                                    NDArray[np.float64]]:
+    """(R_left, P_left, R_right, P_right) from cv2.stereoRectify as ROS camera_calibration calls it.
+
+    R_* rotates a camera's rays into the common rectified frame; P_* (3x4) projects rectified rays, the
+    right one with P[0, 3] = -fx' * baseline. Both cameras' images are taken at the left one's size (ROS
+    requires equal sizes).
+    """
+    T = np.asarray(T_right_from_left, dtype=np.float64)
+    R1, R2, P1, P2, *_ = cv2.stereoRectify(left.K, left.dist_array, right.K, right.dist_array,
+                                           (left.width, left.height), T[:3, :3], T[:3, 3].reshape(3, 1),
+                                           flags=cv2.CALIB_ZERO_DISPARITY, alpha=RECTIFY_ALPHA)
+    return (np.asarray(R1, np.float64), np.asarray(P1, np.float64), np.asarray(R2, np.float64),
+            np.asarray(P2, np.float64))
 
 
 @dataclass
@@ -47,13 +76,26 @@ class Rig:
         raise InputError(f"rig has no pose {name} (nor {inverse})",
                          f"it has: {', '.join(sorted(self.poses)) or 'none'}")
 
+    def _optional_pose(self, name: str) -> bool:
+        try:
+            self.pose(name)
+        except InputError:
+            return False
+        return True
+
     def save(self, folder: str | Path) -> Path:
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         files = {}
+        rectified: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+        if {"camera_left", "camera_right"} <= self.intrinsics.keys() and self._optional_pose(STEREO_POSE):
+            R1, P1, R2, P2 = stereo_rectification(self.intrinsics["camera_left"], self.intrinsics["camera_right"],
+                                                  self.pose(STEREO_POSE))
+            rectified = {"camera_left": (R1, P1), "camera_right": (R2, P2)}
         for device, intr in self.intrinsics.items():
             files[device] = f"{device}.yaml"
-            write_camera_info(folder / files[device], intr, camera_name=device)
+            R, P = rectified.get(device, (None, None))
+            write_camera_info(folder / files[device], intr, camera_name=device, R=R, P=P)
         for name in self.poses:
             parse_pose_name(name)
         doc = {

@@ -2,10 +2,11 @@
 
 import re
 
+import cv2
 import numpy as np
 import pytest
 
-from calibration.boards import detect, parse_board
+from calibration.boards import SUBPIX_CRITERIA, detect, parse_board, refine_corners
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import make_pose, rotation_about, transform_points
@@ -42,18 +43,49 @@ def test_implausible_square_size_suggests_metres(spec: str, suggestion: str) -> 
     assert parse_board("chessboard:9x6:0.3").square_m == 0.3  # the limit itself is accepted
 
 
-def test_subpixel_corners_match_the_rendered_truth() -> None:
+def _rendered_board(distance_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """A 9x6 board of 30 mm squares rendered tilted at distance_m, and its true corners (n, 2) px."""
     board = parse_board("chessboard:9x6:0.03")
     cam = Intrinsics(600.0, 600.0, 319.5, 239.5, 640, 480, (-0.05, 0.01, 0.0, 0.0, 0.0))
     R = rotation_about([1, 0.4, 0], np.radians(25))
-    T = make_pose(R, np.array([0.0, 0.0, 0.75]) - R @ np.array([0.12, 0.075, 0.0]))
+    T = make_pose(R, np.array([0.0, 0.0, distance_m]) - R @ np.array([0.12, 0.075, 0.0]))
     img = PlaneRenderer(cam, T, chessboard_albedo(board), supersample=4).render(
         None, np.random.default_rng(0), ambient=250.0, noise=1.0)
-    view = detect(board, img)
+    return img, cam.project(transform_points(T, board.object_points()))
+
+
+def test_subpixel_corners_match_the_rendered_truth() -> None:
+    img, truth = _rendered_board(0.75)
+    view = detect(parse_board("chessboard:9x6:0.03"), img)
     assert view is not None
-    truth = cam.project(transform_points(T, board.object_points()))
     err = np.linalg.norm(view.image_points - truth, axis=1)
     assert np.sqrt(np.mean(err ** 2)) < CORNER_TOLERANCE_PX
+
+
+@pytest.fixture(scope="module")
+def small_squares() -> tuple[np.ndarray, np.ndarray]:
+    """Squares ~20 px wide: the adaptive half-window is 5 px."""
+    return _rendered_board(0.9)
+
+
+@pytest.mark.parametrize(("corner", "offset_px"), [(0, (-6.0, 2.0)), (0, (7.0, 0.0)), (13, (5.0, 3.0)),
+                                                   (22, (4.0, -5.0)), (53, (-6.0, 2.0))])
+def test_a_raw_corner_pixels_off_is_recovered(small_squares: tuple[np.ndarray, np.ndarray], corner: int,
+                                              offset_px: tuple[float, float]) -> None:
+    """findChessboardCorners now and then puts one raw corner 4-7 px off, beyond the adaptive window's reach."""
+    img, truth = small_squares
+    board = parse_board("chessboard:9x6:0.03")
+    raw = truth.copy()
+    raw[corner] += offset_px
+    # One pass at the adaptive half-window (a quarter of the ~20 px spacing) does not reach the true corner ...
+    once = cv2.cornerSubPix(img, raw[corner:corner + 1].reshape(1, 1, 2).astype(np.float32), (5, 5), (-1, -1),
+                            SUBPIX_CRITERIA).reshape(2)
+    assert np.linalg.norm(once - truth[corner]) > 3.0
+    # ... the retry from where the neighbours put it does, and leaves the other corners where they belong.
+    refined = refine_corners(img, raw, board.pattern_size)
+    err = np.linalg.norm(refined - truth, axis=1)
+    assert err[corner] < 2 * CORNER_TOLERANCE_PX
+    assert np.delete(err, corner).max() < 3 * CORNER_TOLERANCE_PX
 
 
 def test_no_board_gives_none() -> None:

@@ -1,10 +1,13 @@
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
+import yaml
 
 from geometry import InputError, Intrinsics, look_at, make_pose, rotation_about
 from geometry.head import HeadModel
+from geometry.intrinsics import write_camera_info
 from geometry.rig import Rig
 
 
@@ -52,3 +55,57 @@ def test_rig_with_a_broken_pose_is_refused(tmp_path: Path) -> None:
 def test_missing_rig_says_what_to_do(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="arproj calibrate"):
         Rig.load(tmp_path)
+
+
+def _stereo_rig() -> Rig:
+    """A known stereo rig: distorted cameras 0.12 m apart, the right one turned and tilted a little."""
+    left = Intrinsics(810, 805, 652, 395, 1280, 800, (0.08, -0.12, 0.001, -0.0005, 0.02))
+    right = Intrinsics(790, 792, 628, 410, 1280, 800, (-0.05, 0.07, -0.0008, 0.0004, 0.0))
+    R = rotation_about([0.2, 1, 0.1], np.radians(1.5))
+    return Rig(intrinsics={"camera_left": left, "camera_right": right},
+               poses={"T_camera_right_from_camera_left": make_pose(R, R @ [-0.12, 0.004, -0.002])})
+
+
+def _camera_info_matrices(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    doc = yaml.safe_load(path.read_text())
+    return (np.reshape(doc["rectification_matrix"]["data"], (3, 3)),
+            np.reshape(doc["projection_matrix"]["data"], (3, 4)))
+
+
+def test_stereo_camera_info_carries_the_rectification(tmp_path: Path) -> None:
+    rig = _stereo_rig()
+    rig.save(tmp_path)
+    T = rig.poses["T_camera_right_from_camera_left"]
+    baseline = float(np.linalg.norm(T[:3, 3]))
+    (R1, P1), (R2, P2) = (_camera_info_matrices(tmp_path / f"{d}.yaml") for d in ("camera_left", "camera_right"))
+    assert P2[0, 3] / P2[0, 0] == pytest.approx(-baseline, rel=1e-9)
+    assert P1[0, 3] == 0.0
+    np.testing.assert_allclose(R1 @ R1.T, np.eye(3), atol=1e-9)
+    # Exact projections of the same points, rectified as ROS image_proc does, land on the same row.
+    rng = np.random.default_rng(18)
+    p_left = np.column_stack([rng.uniform(-0.8, 0.8, 40), rng.uniform(-0.5, 0.5, 40), rng.uniform(1.5, 4.0, 40)])
+    p_right = p_left @ T[:3, :3].T + T[:3, 3]
+    rows = []
+    for device, p, R, P in (("camera_left", p_left, R1, P1), ("camera_right", p_right, R2, P2)):
+        intr = rig.intrinsics[device]
+        uv = intr.project(p).reshape(-1, 1, 2)
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+        rect = cv2.undistortPoints(uv, intr.K, intr.dist_array, None, R, P, criteria).reshape(-1, 2)
+        rows.append(rect[:, 1])
+    np.testing.assert_allclose(rows[0], rows[1], atol=1e-6)
+    # The raw calibration is what is read back: K, D and the extrinsics, untouched by the rectification.
+    back = Rig.load(tmp_path)
+    assert back.intrinsics == rig.intrinsics
+    np.testing.assert_allclose(back.pose("T_camera_right_from_camera_left"), T, atol=1e-12)
+
+
+def test_rig_written_before_rectification_still_reads(tmp_path: Path) -> None:
+    rig = _stereo_rig()
+    rig.save(tmp_path)
+    for device, intr in rig.intrinsics.items():  # as rig folders were written before: R = I, P = [K|0]
+        write_camera_info(tmp_path / f"{device}.yaml", intr, camera_name=device)
+        R, P = _camera_info_matrices(tmp_path / f"{device}.yaml")
+        np.testing.assert_array_equal(R, np.eye(3))
+        assert P[0, 3] == 0.0
+    back = Rig.load(tmp_path)
+    assert back.intrinsics == rig.intrinsics
