@@ -472,8 +472,8 @@ def capacitive_from_passes(samples: dict[str, NDArray], xy: NDArray[np.float64],
         joined, widths, heights = join_polylines([r[0] for r in runs], widths, heights)
         s = params.softness
         for poly, width, height in zip(joined, widths, heights, strict=True):
-            obj = MapObject("line", poly, width, height / sigma)
             z = height / sigma
+            obj = MapObject("line", poly, width, z)
             raised = float(expit((z - params.capacitive_min_z) / (s * params.capacitive_min_z)))
             obj.cls, obj.confidence = ("non_metal", raised) if raised >= 0.5 else ("unknown", raised)
             obj.features = {"length_m": obj.length_m(), "width_m": width, "capacitive_z": z,
@@ -483,16 +483,23 @@ def capacitive_from_passes(samples: dict[str, NDArray], xy: NDArray[np.float64],
     return lines, _cavities(samples, xy, cap, level, threshold, sigma, lateral_m, params)
 
 
+def _samples_by_pass(pass_ids: NDArray) -> dict[int, NDArray[np.int64]]:
+    """{pass id: its samples' indices in log order}, from one sort rather than a scan of every sample per pass."""
+    order = np.argsort(pass_ids, kind="stable")
+    ids, starts = np.unique(pass_ids[order], return_index=True)
+    return {int(i): idx for i, idx in zip(ids, np.split(order, starts[1:]), strict=True)}
+
+
 def _metal_beside(peaks: PassPeaks, samples: dict[str, NDArray], xy: NDArray[np.float64]) -> NDArray[np.bool_]:
     """(n,) whether the inductive channel shows metal beside each capacitive peak on its own pass: a reading
     CAP_METAL_HEIGHT over the inductive background within the peak's half width (CAP_METAL_REACH_M at least)."""
     ind = np.asarray(samples[INDUCTIVE.name], dtype=np.float64)
     finite = ind[np.isfinite(ind)]
     base = float(np.percentile(finite, 20)) if finite.size else 0.0
-    pids = np.asarray(samples["pass_id"])
+    by_pass = _samples_by_pass(np.asarray(samples["pass_id"]))
     out = np.zeros(len(peaks.xy), bool)
     for k, (point, width, pid) in enumerate(zip(peaks.xy, peaks.width, peaks.pass_id, strict=True)):
-        on_pass = np.flatnonzero(pids == pid)
+        on_pass = by_pass[int(pid)]
         near = on_pass[np.linalg.norm(xy[on_pass] - point, axis=1) <= max(0.5 * width, CAP_METAL_REACH_M)]
         values = ind[near]
         values = values[np.isfinite(values)]
@@ -503,11 +510,11 @@ def _metal_beside(peaks: PassPeaks, samples: dict[str, NDArray], xy: NDArray[np.
 def _cavities(samples: dict[str, NDArray], xy: NDArray[np.float64], cap: NDArray[np.float64], level: float,
               threshold: float, sigma: float, lateral_m: float, params: FusionParams) -> list[MapObject]:
     """Cavity outlines from the lowered stretches of the crossing passes (see capacitive_from_passes)."""
-    pids = np.asarray(samples["pass_id"])
     axes = np.asarray(samples["axis"])
     pieces: list[tuple[int, float, float, float, float]] = []  # (axis, across, start, end, depth)
-    for pid in np.unique(pids[axes <= 1]):
-        idx = np.flatnonzero(pids == pid)
+    for idx in _samples_by_pass(np.asarray(samples["pass_id"])).values():
+        if axes[idx[0]] > 1:  # crossing passes only
+            continue
         ok = np.isfinite(cap[idx]) & np.all(np.isfinite(xy[idx]), axis=1)
         idx = idx[ok]
         if idx.size < 10:

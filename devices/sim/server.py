@@ -13,6 +13,7 @@ import contextlib
 import socket
 import threading
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Any
 
@@ -20,7 +21,7 @@ from devices.link import Framer
 from devices.sim.faults import FaultConfig, FaultInjector
 
 
-class SimDevice:
+class SimDevice(ABC):
     """What a DeviceServer serves. Subclasses set `name` and `framer` and implement handle()."""
 
     name = "device"
@@ -33,15 +34,16 @@ class SimDevice:
     def reset(self) -> None:
         """The device restarts: a host (re)connected. Devices that keep their state across a reconnect do
         nothing."""
+        return
 
     def answers(self, frame: Any) -> bool:
         """Whether the device answers this frame; one it obeys silently (a set command) may be ignored by the
         fault injector, since only the device's behaviour shows that it was lost."""
         return True
 
+    @abstractmethod
     def handle(self, frame: Any) -> list[Any]:
         """The answer frames to one received frame (none: nothing is sent)."""
-        raise NotImplementedError
 
 
 class DeviceServer(threading.Thread):
