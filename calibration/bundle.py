@@ -79,7 +79,7 @@ class _Problem:
     def camera_params(self, x: NDArray, cam: int) -> tuple[float, float, float, float, NDArray]:
         if self.fixed[cam]:
             c = self.cameras[cam]
-            return c.fx, c.fy, c.cx, c.cy, dist5_from(c.dist)
+            return c.fx, c.fy, c.cx, c.cy, np.asarray(c.dist, dtype=np.float64)  # a fixed camera keeps its model
         o, free = self.offsets[cam], self.free[cam]
         d = np.zeros(5)
         d[list(free)] = x[o + 4:o + 4 + len(free)]

@@ -42,6 +42,11 @@ REGION_NAMES = (("top-left", "top", "top-right"), ("left", "centre", "right"),
                 ("bottom-left", "bottom", "bottom-right"))
 DEFAULT_MODEL = "k1k2p1p2k3"
 MIN_PAIR_CORNERS = 6  # a pair needs this many corners seen by both cameras
+# A pair whose two images disagree with the stereo geometry (the board moved between the exposures, a corner
+# mismatched) shows in its epipolar error even where the shared board pose hides it in the reprojection RMS.
+# Robust outlier test over the pairs: above the median by this many robust standard deviations (1.4826 MAD) …
+EPIPOLAR_OUTLIER_SIGMAS = 3.5
+EPIPOLAR_OUTLIER_MIN_PX = 0.15  # … and above this floor (good pairs of real cameras lie at 0.05-0.17 px)
 
 
 @dataclass
@@ -83,7 +88,9 @@ class StereoCalibration:
     pair_sources: list[tuple[str, str]]
     per_pair_rms_px: list[float]
     T_left_from_board: list[NDArray[np.float64]]
+    per_pair_epipolar_px: list[float] = field(default_factory=list)
     rejected: list[str] = field(default_factory=list)
+    rejected_why: dict[str, str] = field(default_factory=dict)  # pair → the test it failed, with its figure
     coverage: dict = field(default_factory=dict)
     mono_rms_px: tuple[float, float] = (float("nan"), float("nan"))
     distortion_model: str = DEFAULT_MODEL
@@ -102,9 +109,12 @@ class StereoCalibration:
             "baseline_m": round(self.baseline_m, 6),
             "pairs_used": len(self.pair_sources),
             "pairs_rejected": list(self.rejected),
+            "pairs_rejected_why": dict(self.rejected_why),
             "distortion_model": self.distortion_model,
             "per_pair_rms_px": {f"{Path(a).name} | {Path(b).name}": round(r, 4) for (a, b), r in
                                 zip(self.pair_sources, self.per_pair_rms_px, strict=True)},
+            "per_pair_epipolar_px": {f"{Path(a).name} | {Path(b).name}": round(e, 4) for (a, b), e in
+                                     zip(self.pair_sources, self.per_pair_epipolar_px, strict=True)},
             "coverage": self.coverage,
         }
 
@@ -253,23 +263,47 @@ def calibrate_stereo(left_views: list[BoardView | None], right_views: list[Board
     right_all = [v for v in right_views if v is not None]
     mono_left = calibrate_camera(left_all, model, reject_outliers, "camera_left")
     mono_right = calibrate_camera(right_all, model, reject_outliers, "camera_right")
-    rejected_sources = {s for s, _ in mono_left.rejected} | {s for s, _ in mono_right.rejected}
+    left_rejected = {s for s, _ in mono_left.rejected}
+    rejected_sources = left_rejected | {s for s, _ in mono_right.rejected}
     rejected = sorted(rejected_sources)
+    why = {source: f"{'left' if source in left_rejected else 'right'} camera alone: view RMS above "
+                   f"{OUTLIER_FACTOR:g}x the median view's and {OUTLIER_MIN_PX:g} px" for source in rejected}
     pairs = [(lv, rv) for lv, rv in pairs if lv.source not in rejected_sources
              and rv.source not in rejected_sources]
     while True:
         result = _joint(pairs, mono_left, mono_right, model)
-        per_pair = result.per_pair_rms_px
-        worst = int(np.argmax(per_pair))
-        limit = max(OUTLIER_FACTOR * float(np.median(per_pair)), OUTLIER_MIN_PX)
-        if not reject_outliers or per_pair[worst] <= limit or len(pairs) <= MIN_VIEWS:
+        outlier = _outlier_pair(result) if reject_outliers and len(pairs) > MIN_VIEWS else None
+        if outlier is None:
             break
-        rejected.append(f"{pairs[worst][0].source} | {pairs[worst][1].source}")
+        worst, reason = outlier
+        name = f"{pairs[worst][0].source} | {pairs[worst][1].source}"
+        rejected.append(name)
+        why[name] = reason
         del pairs[worst]
     result.rejected = rejected
+    result.rejected_why = why
     result.coverage = coverage_report([lv for lv, _ in pairs], result.T_left_from_board)
     result.mono_rms_px = (mono_left.rms_px, mono_right.rms_px)
     return result
+
+
+def _outlier_pair(result: StereoCalibration) -> tuple[int, str] | None:
+    """The worst pair by reprojection RMS, else by epipolar error, when it fails its test; (index, why)."""
+    rms = np.asarray(result.per_pair_rms_px)
+    worst = int(np.argmax(rms))
+    limit = max(OUTLIER_FACTOR * float(np.median(rms)), OUTLIER_MIN_PX)
+    if rms[worst] > limit:
+        return worst, (f"pair RMS {rms[worst]:.3f} px above {OUTLIER_FACTOR:g}x the median pair's and "
+                       f"{OUTLIER_MIN_PX:g} px")
+    epi = np.asarray(result.per_pair_epipolar_px)
+    worst = int(np.argmax(epi))
+    median = float(np.median(epi))
+    spread = 1.4826 * float(np.median(np.abs(epi - median)))
+    limit = max(median + EPIPOLAR_OUTLIER_SIGMAS * spread, EPIPOLAR_OUTLIER_MIN_PX)
+    if epi[worst] > limit:
+        return worst, (f"epipolar error {epi[worst]:.3f} px per image above {limit:.3f} px (the median pair's "
+                       f"{median:.3f} px + {EPIPOLAR_OUTLIER_SIGMAS:g} robust standard deviations)")
+    return None
 
 
 def _joint(pairs: list[tuple[BoardView, BoardView]], mono_left: CameraCalibration,
@@ -302,7 +336,7 @@ def _joint(pairs: list[tuple[BoardView, BoardView]], mono_left: CameraCalibratio
            for lv, rv in pairs]
     return StereoCalibration(left, right, fit.T_1_from_0, fit.rms_px, float(np.mean(epi)),
                              [(lv.source, rv.source) for lv, rv in pairs], per_pair, fit.T_0_from_view,
-                             distortion_model=model)
+                             per_pair_epipolar_px=epi, distortion_model=model)
 
 
 def coverage_report(views: list[BoardView], T_camera_from_board: list[NDArray[np.float64]]) -> dict:

@@ -68,6 +68,7 @@ def stereo_command(left: str, right: str, board_spec: str, out: Path, model: str
         "baseline_m": figures["baseline_m"],
         "pairs_used": figures["pairs_used"],
         "pairs_rejected": figures["pairs_rejected"],
+        "pairs_rejected_why": figures["pairs_rejected_why"],
         "images_without_board": images.no_board,
         "advice": coverage_advice(calib.coverage),
         "camera_left": {"fx": calib.left.fx, "fy": calib.left.fy, "cx": calib.left.cx, "cy": calib.left.cy},
@@ -81,7 +82,8 @@ def stereo_command(left: str, right: str, board_spec: str, out: Path, model: str
         console.print(f"  reprojection RMS {summary['reprojection_rms_px']:.3f} px, epipolar error "
                       f"{summary['epipolar_error_px_per_image']:.3f} px per image, baseline "
                       f"{1000 * summary['baseline_m']:.2f} mm", highlight=False)
-        _print_rejected_and_advice(summary["pairs_rejected"], summary["advice"])
+        _print_rejected_and_advice([f"{name}: {calib.rejected_why[name]}" for name in calib.rejected],
+                                   summary["advice"])
     return summary
 
 

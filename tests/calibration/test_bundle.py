@@ -239,8 +239,6 @@ def test_two_cameras_need_an_initial_relative_pose() -> None:
         bundle_adjust([CAM0, CAM1], [MODEL, MODEL], observations, poses)
 
 
-@pytest.mark.xfail(strict=True, reason="bundle_adjust projects with dist5_from(): a fixed camera's k4–k6 are "
-                   "dropped from the model while the result still reports them (see the test report)")
 def test_fixed_rational_camera_is_modelled_as_given_or_refused() -> None:
     # A valid Intrinsics with OpenCV's rational model (read_camera_info accepts rational_polynomial files)
     rational = Intrinsics(800.0, 806.0, 322.0, 236.0, 640, 480, (1.8, 0.4, 0.0012, -0.0008, 0.01, 1.95, 0.7, 0.05))

@@ -62,6 +62,32 @@ def test_outlier_view_is_rejected_and_named() -> None:
     assert abs(calib.left.fx / LEFT.fx - 1) < 0.003  # the 0.2 % focal target with 50 % slack: 9 views left, not 12
 
 
+def test_pair_whose_board_moved_between_exposures_is_rejected_on_its_epipolar_error() -> None:
+    """The right image of pair 5 taken after the board moved 0.6 mm across the baseline (cameras not in sync).
+
+    Its reprojection RMS stays under the RMS test's 0.5 px floor (the shared board pose splits the shift between
+    the two images), but its epipolar error (≈ 0.3 px per image against ≈ 0.06 px) fails the epipolar test.
+    """
+    left, right = synthetic_pairs(12, seed=4)
+    rng = np.random.default_rng(11)
+    pose = board_poses(BOARD, 12, np.random.default_rng(4), distance_m=0.7, max_tilt_deg=35.0)[5]
+    moved = make_pose(None, [0.0, 0.0006, 0.0]) @ pose  # 0.6 mm down in the left camera's frame
+    pr = transform_points(T_RIGHT_FROM_LEFT, transform_points(moved, BOARD.object_points()))
+    right[5].image_points = RIGHT.project(pr) + rng.normal(0, NOISE_PX, (len(pr), 2))
+    kept = calibrate_stereo(left, right, BOARD, reject_outliers=False)
+    assert max(kept.per_pair_rms_px) < 0.5  # the RMS test alone cannot see it
+    calib = calibrate_stereo(left, right, BOARD)
+    assert calib.rejected == ["left05.png | right05.png"]
+    assert "epipolar error" in calib.rejected_why["left05.png | right05.png"]
+    assert calib.epipolar_px_per_image < 1.5 * NOISE_PX  # the good pairs alone, as in the first test
+
+
+def test_good_pairs_are_not_rejected_by_the_epipolar_test() -> None:
+    for seed in range(4):
+        left, right = synthetic_pairs(12, seed=seed)
+        assert calibrate_stereo(left, right, BOARD).rejected == []
+
+
 def test_too_few_views_and_frontal_only_are_input_errors() -> None:
     left, right = synthetic_pairs(3)
     with pytest.raises(InputError, match="at least 4"):
