@@ -50,52 +50,74 @@ class RegistrationEvidence:
     notes: list[str] = field(default_factory=list)
 
 
+# What the craftsman at the wall reads on the warning frame: what happened, in plain words, and what to do.
+# The technical reasons (with device names and figures) go to the log and the operator's terminal.
+SAY_NO_WALL_POSE = "The wall could not be measured. Clear the beam and keep the wall in view."
+SAY_HEAD_SILENT = "The projector head does not answer. Call the operator."
+SAY_HEAD_MOVED = "The projector head has moved. Wait until this warning goes."
+SAY_ROBOT_MOVED = "The robot has moved. Do not touch it while it measures again."
+SAY_PATTERN_HIDDEN = "The check marks are hidden. Step out of the beam."
+SAY_RIG = "The robot's cameras or laser disagree. Call the operator."
+
+
+def _say_off_by(mm: float) -> str:
+    return f"The picture may be up to {mm:.0f} mm off. Wait until this warning goes."
+
+
 @dataclass
 class GateDecision:
     show_map: bool
     reasons: list[str]
     registration_sigma_m: float  # 1σ used for the safety bands
     bound_m: float               # 95 % bound of the registration error compared with the tolerance
+    craftsman: list[str] = field(default_factory=list)  # the warning frame's lines, one per kind of reason
 
 
 def decide(ev: RegistrationEvidence, tolerance_m: float = tol.REGISTRATION_TOLERANCE_M) -> GateDecision:
     reasons: list[str] = []
+    say: list[str] = []
+
+    def fail(reason: str, words: str) -> None:
+        reasons.append(reason)
+        if words not in say:
+            say.append(words)
+
     if ev.pose_failure:
-        reasons.append(f"wall pose unknown: {ev.pose_failure}")
+        fail(f"wall pose unknown: {ev.pose_failure}", SAY_NO_WALL_POSE)
     if ev.pose_sigma_m is None and not ev.pose_failure:
-        reasons.append("wall pose not estimated yet")
+        fail("wall pose not estimated yet", SAY_NO_WALL_POSE)
     if ev.head_failure:
-        reasons.append(f"head not answering: {ev.head_failure.split(' — ')[0]}")
+        fail(f"head not answering: {ev.head_failure.split(' — ')[0]}", SAY_HEAD_SILENT)
     if ev.head_command_error_deg > HEAD_COMMAND_TOLERANCE_DEG:
-        reasons.append(f"head not where commanded ({ev.head_command_error_deg:.2f}° off)")
+        fail(f"head not where commanded ({ev.head_command_error_deg:.2f}° off)", SAY_HEAD_MOVED)
     if ev.robot_motion_m > ROBOT_MOTION_TOLERANCE_M:
-        reasons.append(f"robot moved {ev.robot_motion_m * 1000:.0f} mm since the wall pose was estimated")
+        fail(f"robot moved {ev.robot_motion_m * 1000:.0f} mm since the wall pose was estimated", SAY_ROBOT_MOVED)
     sigma = ev.pose_sigma_m if ev.pose_sigma_m is not None else np.inf
     loop_max = 0.0
     if ev.closed_loop_expected > 0:
         seen = 0 if ev.closed_loop_errors_m is None else len(ev.closed_loop_errors_m)
         if seen < max(tol.CLOSED_LOOP_MIN_FEATURES, MIN_VISIBLE_FRACTION * ev.closed_loop_expected):
-            reasons.append(f"pattern lost: {seen} of {ev.closed_loop_expected} check marks seen")
+            fail(f"pattern lost: {seen} of {ev.closed_loop_expected} check marks seen", SAY_PATTERN_HIDDEN)
         elif ev.closed_loop_errors_m is not None:
             loop_max = float(np.max(ev.closed_loop_errors_m))  # the worst mark: the map must hold everywhere
             if loop_max > tolerance_m:
-                reasons.append(f"projection lands up to {loop_max * 1000:.0f} mm off where it should (head "
-                               "slipped, projector moved or wrong rig)")
+                fail(f"projection lands up to {loop_max * 1000:.0f} mm off where it should (head slipped, "
+                     "projector moved or wrong rig)", _say_off_by(loop_max * 1000))
     if ev.laser_plane_offset_m is not None and np.isfinite(ev.laser_plane_offset_m) and \
             ev.laser_plane_offset_m > LASER_PLANE_TOLERANCE_M:
-        reasons.append(f"laser and cameras disagree about the wall by {ev.laser_plane_offset_m * 1000:.0f} mm: "
-                       "wrong rig file or a camera moved?")
+        fail(f"laser and cameras disagree about the wall by {ev.laser_plane_offset_m * 1000:.0f} mm: wrong rig "
+             "file or a camera moved?", SAY_RIG)
     if ev.stereo_residual_px is not None and ev.stereo_residual_px > STEREO_RESIDUAL_MAX_PX:
-        reasons.append(f"cameras disagree with the rig file (residual {ev.stereo_residual_px:.1f} px): wrong "
-                       "or outdated rig?")
+        fail(f"cameras disagree with the rig file (residual {ev.stereo_residual_px:.1f} px): wrong or outdated "
+             "rig?", SAY_RIG)
     # The closed loop measures the projector against the camera-measured wall, so it cannot see an error of
     # that wall estimate itself (both share it): its worst mark and the pose's 95 % error add up.
     bound = tol.Z95 * sigma + loop_max + ev.robot_motion_m
     if np.isfinite(bound) and bound > tolerance_m and not reasons:
-        reasons.append(f"registration uncertain: ±{bound * 1000:.1f} mm exceeds the {tolerance_m * 1000:.0f} mm "
-                       "tolerance")
+        fail(f"registration uncertain: ±{bound * 1000:.1f} mm exceeds the {tolerance_m * 1000:.0f} mm tolerance",
+             _say_off_by(bound * 1000))
     registration_sigma = float(max(sigma, loop_max / tol.Z95)) if np.isfinite(sigma) else np.inf
-    return GateDecision(not reasons, reasons, registration_sigma, float(bound))
+    return GateDecision(not reasons, reasons, registration_sigma, float(bound), say)
 
 
 # -- laser scan matching (robot moved?) -------------------------------------------------------------------

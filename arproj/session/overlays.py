@@ -344,21 +344,46 @@ def draw_legend(frame: NDArray[np.uint8], lines: list[str] = (), corner: str = "
     return frame
 
 
-def warning_frame(width: int, height: int, reasons: list[str]) -> NDArray[np.uint8]:
-    """The frame projected instead of the map when the safety gate closes: a red-bordered warning."""
+def _wrap(text: str, max_width_px: int, scale: float, thickness: int) -> list[str]:
+    """text broken at spaces into lines no wider than max_width_px (a single over-long word stays whole)."""
+    lines: list[str] = []
+    for word in text.split():
+        trial = f"{lines[-1]} {word}" if lines else word
+        if lines and cv2.getTextSize(trial, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness)[0][0] <= max_width_px:
+            lines[-1] = trial
+        else:
+            lines.append(word)
+    return lines or [""]
+
+
+def warning_frame(width: int, height: int, messages: list[str]) -> NDArray[np.uint8]:
+    """The frame projected instead of the map when the safety gate closes: a red-bordered warning whose title
+    and messages (the gate's words for the craftsman) are wrapped and, if need be, shrunk to stay inside it."""
     frame = np.zeros((height, width, 3), dtype=np.uint8)
     border = max(8, min(width, height) // 40)
     cv2.rectangle(frame, (border // 2, border // 2), (width - border // 2, height - border // 2),
                   (255, 40, 40), border)
+    inner_w = width - 2 * border - 2 * max(4, width // 40)
+    inner_h = height - 2 * border - 2 * max(4, height // 40)
+    texts = [("MAP HIDDEN", 1.0, (255, 60, 60)), ("Do not drill by this picture.", 0.6, (255, 230, 120))]
+    texts += [(m, 0.55, (255, 255, 255)) for m in messages[:6]]
     scale = max(0.6, min(width, height) / 500.0)
-    thickness = max(2, round(scale * 2))
-    lines = ["MAP HIDDEN: NOT REGISTERED", "Do not drill by this projection.", "", *reasons[:6]]
-    y = int(height * 0.25)
-    for i, text in enumerate(lines):
-        s = scale if i == 0 else scale * 0.55
-        t = thickness if i == 0 else max(1, thickness // 2)
-        size = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, s, t)[0]
-        colour = (255, 60, 60) if i == 0 else (255, 230, 120)
-        cv2.putText(frame, text, ((width - size[0]) // 2, y), cv2.FONT_HERSHEY_SIMPLEX, s, colour, t, cv2.LINE_AA)
-        y += int(size[1] * 2.0) + 4
+    while True:  # shrink until every wrapped line fits the frame's height (widths are wrapped to fit)
+        laid = []
+        for text, rel, colour in texts:
+            s = scale * rel
+            t = max(1, round(s * 2))
+            laid.extend((line, s, t, colour) for line in _wrap(text, inner_w, s, t))
+        heights = [int(cv2.getTextSize(line, cv2.FONT_HERSHEY_SIMPLEX, s, t)[0][1] * 1.9) + 4
+                   for line, s, t, _ in laid]
+        widest = max(cv2.getTextSize(line, cv2.FONT_HERSHEY_SIMPLEX, s, t)[0][0] for line, s, t, _ in laid)
+        if (sum(heights) <= inner_h and widest <= inner_w) or scale < 0.2:
+            break
+        scale *= 0.85
+    y = (height - sum(heights)) // 2
+    for (line, s, t, colour), step in zip(laid, heights, strict=True):
+        size = cv2.getTextSize(line, cv2.FONT_HERSHEY_SIMPLEX, s, t)[0]
+        y += step
+        cv2.putText(frame, line, ((width - size[0]) // 2, y - (step - size[1]) // 2), cv2.FONT_HERSHEY_SIMPLEX,
+                    s, colour, t, cv2.LINE_AA)
     return frame

@@ -347,7 +347,7 @@ class ProjectionSession:
         """The map (pre-warped, with legend and status) when the gate is open, else the warning."""
         intr = self.projector_intr
         if not decision.show_map or self.registration is None:
-            return overlays.warning_frame(intr.width, intr.height, decision.reasons)
+            return overlays.warning_frame(intr.width, intr.height, decision.craftsman)
         trusted = self.registration.trusted
         clip = None if trusted is None else trusted.polygon
         self.map_projector.set_overlays(decision.registration_sigma_m, self.drill_xy, clip=clip)

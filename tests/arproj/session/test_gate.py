@@ -38,6 +38,14 @@ def test_each_failure_closes_the_gate_and_says_why(changes, reason):
     d = gate.decide(_good(**changes))
     assert not d.show_map
     assert any(reason in r for r in d.reasons), d.reasons
+    # The craftsman gets one plain sentence per kind of failure, never a device address or a pixel residual.
+    assert d.craftsman and all("://" not in line and " px" not in line for line in d.craftsman)
+
+
+def test_a_head_failure_names_its_port_to_the_operator_only():
+    d = gate.decide(_good(head_failure="socket://127.0.0.1:4711: no answer to a status query — check the cable"))
+    assert any("socket://127.0.0.1:4711" in r for r in d.reasons)
+    assert d.craftsman == [gate.SAY_HEAD_SILENT]
 
 
 def _scan(position, yaw, rng, noise=0.01):

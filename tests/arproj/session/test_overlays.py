@@ -106,6 +106,25 @@ def test_legend_and_warning_are_drawn():
     assert warning[:, :, 0].mean() > warning[:, :, 2].mean()
 
 
+@pytest.mark.parametrize("size", [(1280, 800), (640, 400), (320, 240)])
+def test_warning_text_stays_inside_the_border_however_long(size):
+    """Every message of the gate at once, on frames down to 320 x 240: no text on or beyond the red border."""
+    from arproj.session import gate
+
+    w, h = size
+    messages = [gate.SAY_NO_WALL_POSE, gate.SAY_HEAD_SILENT, gate.SAY_ROBOT_MOVED, gate.SAY_PATTERN_HIDDEN,
+                gate.SAY_RIG, "The picture may be up to 12 mm off. Wait until this warning goes."]
+    frame = overlays.warning_frame(w, h, messages)
+    border = max(8, min(w, h) // 40)
+    text = np.any(frame != (255, 40, 40), axis=-1) & np.any(frame > 0, axis=-1)  # lit, not border red
+    rows, cols = np.nonzero(text)
+    assert rows.size > 0
+    assert cols.min() > border and cols.max() < w - border and rows.min() > border and rows.max() < h - border
+    # The same frame without messages has less text: the messages were drawn, not dropped.
+    assert text.sum() > 2 * (np.any(overlays.warning_frame(w, h, []) != (255, 40, 40), axis=-1)
+                             & np.any(overlays.warning_frame(w, h, []) > 0, axis=-1)).sum()
+
+
 def test_map_is_drawn_only_inside_the_trusted_polygon():
     wall = _wall([CABLE, PIPE])
     clip = np.array([[0.5, 0.5], [1.8, 0.5], [1.8, 2.0], [0.5, 2.0]])
