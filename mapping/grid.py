@@ -294,7 +294,7 @@ def cell_points(xy: ArrayLike, values: ArrayLike, cell_m: float, resolution: flo
     cell; a cell whose reading is NaN gives NaN. Returns (points (m, 2), values (m,))."""
     p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     v = np.asarray(values, dtype=np.float64).reshape(-1)
-    k = int(round(cell_m / resolution))
+    k = round(cell_m / resolution)
     offsets = (np.arange(k) + 0.5) * resolution - 0.5 * cell_m
     ox, oy = np.meshgrid(offsets, offsets)
     points = (p[:, None, :] + np.column_stack([ox.ravel(), oy.ravel()])[None, :, :]).reshape(-1, 2)

@@ -76,13 +76,13 @@ class ImportSummary:
 
 
 def check_inside(record: Record, width_m: float, height_m: float, wall_source: str) -> None:
-    """InputError naming the first sample (its line) that lies outside the wall."""
-    half = 0.5 * (record.cell_m or 0.0)  # a cell must lie on the wall as a whole
+    """InputError naming the first cell of a gridded record (its line) that does not lie on the wall whole."""
+    half = 0.5 * (record.cell_m or 0.0)
     outside = ((record.xy[:, 0] + half > width_m + 1e-9) | (record.xy[:, 1] + half > height_m + 1e-9))
     if outside.any():
         k = int(np.flatnonzero(outside)[0])
         x, y = record.xy[k]
-        what = f"the cell centred at ({x:g}, {y:g}) m" if record.cell_m else f"x_m, y_m = {x:g}, {y:g}"
+        what = f"the cell centred at ({x:g}, {y:g}) m"
         raise fail(record.path, int(record.line[k]), f"{what} lies beyond the wall {wall_source} "
                    f"({width_m:g} x {height_m:g} m)", "is it the right wall, and the right --cell-m?")
 
@@ -97,7 +97,8 @@ def import_table(path: str | Path, out: str | Path, fmt: str | None = None,
     digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
     if wall is not None:
         size = (float(wall.width_m), float(wall.height_m))
-        check_inside(record, *size, wall_path or wall.name)
+        if record.cell_m is not None:  # a cell off the wall is a wrong cell size or wall (points may stray)
+            check_inside(record, *size, wall_path or wall.name)
         wall_meta = {"wall_fingerprint": wall.fingerprint(), "wall_name": wall.name, "wall_path": wall_path}
     else:
         size = record.extent_m

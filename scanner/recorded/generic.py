@@ -2,7 +2,8 @@
 
     x_m,y_m,<channel>[,<channel>…][,time_s][,pass]
 
-`x_m, y_m`: the sample's position on the wall (metres, x right, y up from the lower-left corner); any of the
+`x_m, y_m`: the sample's position on the wall (metres, x right, y up from the lower-left corner; a scanner's
+positions may lie a little beyond the wall's edges, and the map keeps only what lies on it); any of the
 scanner's channels (scanner.channels: inductive, capacitive, ac) in display units 0..1 (device counts / 1000),
 an empty cell for a missing reading; `time_s` optional (seconds); `pass` optional (integer: the samples of one
 straight pass, in order). Without `pass`, a new pass starts where consecutive samples lie more than
@@ -71,17 +72,11 @@ def read(path: str, text: str) -> Record:
             if name in channels and not 0.0 <= value <= 1.0:
                 raise fail(path, ln, f"{name} = {cell.strip()} is outside 0..1",
                            "readings are display units 0..1 (device counts / 1000)")
-            if name in POSITION_COLUMNS and value < 0.0:
-                raise fail(path, ln, f"{name} = {cell.strip()} is below 0",
-                           "positions are wall metres from the wall's lower-left corner")
             if name == PASS_COLUMN and value != int(value):
                 raise fail(path, ln, f"pass = {cell.strip()} is not an integer")
             values[name][k] = value
     xy = np.column_stack([values["x_m"], values["y_m"]])
-    if PASS_COLUMN in columns:
-        pass_id = values[PASS_COLUMN].astype(np.int64)
-    else:
-        pass_id = passes_from_gaps(xy)
+    pass_id = values[PASS_COLUMN].astype(np.int64) if PASS_COLUMN in columns else passes_from_gaps(xy)
     return Record(path, NAME, xy, {c: values[c] for c in channels}, pass_id, lines,
                   time_s=values.get(TIME_COLUMN), extent_m=(float(xy[:, 0].max()), float(xy[:, 1].max())))
 
