@@ -1,5 +1,6 @@
-"""The wall scanner's line protocol (ours, documented here; the simulator in scanner/sim/devices.py speaks it):
-its framing (`CrcLineFramer`) and the host's driver (`WallScanner`).
+"""The wall scanner's line protocol (ours, summarised here, specified for firmware authors in
+docs/scanner-protocol.md; the simulator in scanner/sim/devices.py speaks it, `arproj devices-check scanner URL`
+checks an implementation): its framing (`CrcLineFramer`) and the host's driver (`WallScanner`).
 
 Every line in both directions ends with `*CCCCCCCC`: the CRC-32 (zlib/IEEE) of all bytes before the `*`, eight
 upper-case hex digits (an NMEA-style XOR byte lets ~1/256 damaged lines through, and insertions of equal byte

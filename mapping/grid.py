@@ -278,6 +278,50 @@ class WallGrid:
         return sensor
 
 
+def cell_resolution(cell_m: float, resolution: float) -> float:
+    """The map cell size nearest below `resolution` that divides a record's cell `cell_m` exactly, so that the
+    record's cell edges are map cell edges (a map cell lies in one record cell or in none)."""
+    return cell_m / max(1, int(np.ceil(cell_m / resolution - 1e-9)))
+
+
+def cell_points(xy: ArrayLike, values: ArrayLike, cell_m: float, resolution: float
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A gridded record's readings on the map: the centres of the map cells inside each record cell (xy (n, 2)
+    record cell centres, wall metres, on a lattice of pitch cell_m from the wall's corner; the map's cells of
+    `resolution` divide cell_m, cell_resolution) and the reading there, interpolated bilinearly between the
+    centres of the measured record cells around it (a sampled field's reconstruction: a pipe across the cells
+    stays a ridge, not a staircase). Only measured cells' points are given, so a reading covers exactly its
+    cell; a cell whose reading is NaN gives NaN. Returns (points (m, 2), values (m,))."""
+    p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    k = round(cell_m / resolution)
+    offsets = (np.arange(k) + 0.5) * resolution - 0.5 * cell_m
+    ox, oy = np.meshgrid(offsets, offsets)
+    points = (p[:, None, :] + np.column_stack([ox.ravel(), oy.ravel()])[None, :, :]).reshape(-1, 2)
+    owner = np.repeat(np.arange(len(p)), k * k)
+    if p.size == 0:
+        return points, np.zeros(0)
+    ij = np.rint(p / cell_m - 0.5).astype(np.int64)  # lattice indices of the record cells
+    lo = ij.min(axis=0)
+    shape = tuple((ij.max(axis=0) - lo + 1)[::-1])
+    lattice = np.full(shape, np.nan)  # (rows along y, columns along x)
+    lattice[ij[:, 1] - lo[1], ij[:, 0] - lo[0]] = v
+    q = points / cell_m - 0.5 - lo  # continuous lattice coordinates, cell centres at integers
+    c0, r0 = np.floor(q[:, 0]).astype(np.int64), np.floor(q[:, 1]).astype(np.int64)
+    fc, fr = q[:, 0] - c0, q[:, 1] - r0
+    num, den = np.zeros(len(q)), np.zeros(len(q))
+    for dc, dr, w in ((0, 0, (1 - fc) * (1 - fr)), (1, 0, fc * (1 - fr)), (0, 1, (1 - fc) * fr), (1, 1, fc * fr)):
+        cc, rr = c0 + dc, r0 + dr
+        inside = (cc >= 0) & (cc < shape[1]) & (rr >= 0) & (rr < shape[0])
+        got = np.full(len(q), np.nan)
+        got[inside] = lattice[rr[inside], cc[inside]]
+        ok = np.isfinite(got)
+        num[ok] += w[ok] * got[ok]
+        den[ok] += w[ok]
+    out = np.where(np.isfinite(v[owner]) & (den > 0), num / np.maximum(den, 1e-300), np.nan)
+    return points, out
+
+
 def build_grid(xy: ArrayLike, readings: Mapping[str, ArrayLike], info: GridInfo | None = None,
                models: Mapping[str, SensorModel] | None = None,
                sensors: Sequence[str] = SENSORS, resolution: float = tol.DEFAULT_RESOLUTION_M,

@@ -20,17 +20,20 @@ from mapping import tolerances as tol
 from mapping.depth import AcModel, estimate_depths
 from mapping.evidence import Coverage, coverage_radii, mapped_objects, sample_noise
 from mapping.fusion import METAL_CLASSES, UNKNOWN, Fuser, FusionParams, InductiveModel
-from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid
+from mapping.grid import SENSORS, GridInfo, SensorModel, WallGrid, cell_points, cell_resolution
 from mapping.map_object import MapObject
 from mapping.mapfile import MappedObject
 from mapping.objects import extract_lines, extract_points, extract_regions, near_lines, points_on_lines
 from mapping.scandata import ScanData
 from mapping.stitching import FrameGraph, laser_constraints
-from scanner.channels import AC, CAPACITIVE, INDUCTIVE
+from scanner.channels import AC, CAPACITIVE, INDUCTIVE, claimable
 from scanner.log import DamagedLogError, ScanLog
 from scanner.sensor_model import ADDITIVE_SATURATED, additive_units
 
 STITCH_ROUNDS = 2  # feature pairing + alignment rounds (the second re-pairs and re-linearises)
+# A gridded record's map cell is covered when a cell-centre point lies this share of a map cell from its
+# centre: that cell alone (its neighbours' centres lie a whole cell away)
+CELL_CENTRE_RADIUS = 0.25
 SPARSE_COVERAGE = 0.6  # below this fraction of the wall's cells observed, lines come from the passes' peaks
 CAP_TWO_SIDED = CAPACITIVE.two_sided  # cavities lower the capacitive map: two-sided background
 
@@ -251,9 +254,18 @@ def build_map(data: ScanData, settings: MapSettings | None = None) -> MapResult:
         warnings.append(f"{int(unplaced.sum())} sample(s) without a position skipped")
     bounds = wall_bounds(data, xy)
     margin = 0.0
+    # A gridded record's sample covers its cell: the map's cells divide the record's, edges on edges
+    cell = data.cell_m
+    resolution = settings.resolution_m if cell is None else cell_resolution(cell, settings.resolution_m)
     info = GridInfo.covering(bounds[0] - margin, bounds[1] - margin, bounds[2] + margin, bounds[3] + margin,
-                             settings.resolution_m)
-    readings = {s: data.samples[s] for s in SENSORS if s in data.samples}
+                             resolution)
+    if cell is not None:
+        notes.append(f"gridded record: each reading covers its {cell * 1000:g} mm cell (map cells "
+                     f"{resolution * 1000:.3g} mm); cells not in the record stay unknown")
+    absent = [s for s in SENSORS if s not in data.channels]
+    if absent:
+        notes.append(f"the record has no {', '.join(absent)} channel: classes only those tell are not claimed")
+    readings = {s: data.samples[s] for s in SENSORS if s in data.samples and s in data.channels}
     models: dict[str, SensorModel] = {}
     for s, v in readings.items():
         nan = int((~np.isfinite(v)).sum())
@@ -266,12 +278,17 @@ def build_map(data: ScanData, settings: MapSettings | None = None) -> MapResult:
     grid = WallGrid(info, models)
     shift = float((data.meta.get("sensor") or {}).get("hysteresis_m", 0.0) or 0.0)
     looked: dict[str, NDArray[np.float64]] = {}
+    radii = coverage_radii(data.meta.get("sensor"))
     for s in models:
         pos = hysteresis_corrected(xy, data, shift) if s == INDUCTIVE.name else xy
-        grid.add_samples(pos, {s: readings[s]})
-        looked[s] = pos[np.isfinite(readings[s]) & np.all(np.isfinite(pos), axis=1)]
+        values = readings[s]
+        if cell is not None:  # the reading stands at every map cell centre of its cell, and covers just those
+            pos, values = cell_points(pos, values, cell, resolution)
+            radii[s] = CELL_CENTRE_RADIUS * resolution
+        grid.add_samples(pos, {s: values})
+        looked[s] = pos[np.isfinite(values) & np.all(np.isfinite(pos), axis=1)]
     coverage = float(np.mean(grid.known(next(iter(models)))))
-    sparse = coverage < SPARSE_COVERAGE
+    sparse = cell is None and coverage < SPARSE_COVERAGE  # a record's cells are a grid, not passes
     objects = extract_objects(grid, settings, data.meta.get("sensor"), data if sparse else None, xy, shift)
     if sparse:
         notes.append(f"sparse scan ({coverage:.0%} of the wall covered): lines linked from the passes' peaks")
@@ -280,7 +297,7 @@ def build_map(data: ScanData, settings: MapSettings | None = None) -> MapResult:
                     AcModel.from_meta(sensor_meta))
     pass_ids = data.samples.get("pass_id", np.zeros(data.n_samples, np.int64))
     noise = {s: sample_noise(readings[s], pass_ids, s) for s in models}
-    evidence = Coverage.from_grid(grid, looked, objects, coverage_radii(data.meta.get("sensor")), bounds, noise)
+    evidence = Coverage.from_grid(grid, looked, objects, radii, bounds, noise)
     truth = None
     if "true_x_m" in data.samples and np.isfinite(data.samples["true_x_m"]).any():
         truth = np.column_stack([data.samples["true_x_m"], data.samples["true_y_m"]])
@@ -376,10 +393,13 @@ def extract_objects(grid: WallGrid, settings: MapSettings | None = None, sensor_
         metal_found = [_metal_named(fuser.classify(o)) for o in lines + points + metal_regions]
         metal_found += [_box(fuser, o) for o in boxes]
         capacitive = [o for o in (fuser.classify(r) for r in regions) if o.cls != UNKNOWN]
+    # A class is a claim the record's channels support: without the channel a class needs, metal is "metal"
+    # and a capacitive finding is left to the evidence layer (an unexplained response)
+    metal_found = [_within_channels(o, grid.sensors) for o in metal_found]
     # a straight ridge of sheet metal (fusion's "metal", not a ridge merely named metal by its channel)
     metal_found = [_as_outline(o) if o.kind == "line" and o.cls == "metal" and len(o.points_m) == 2
                    and not o.features.get(NAMED_BY_CHANNEL) else o for o in metal_found]
-    return metal_found + non_metal + capacitive
+    return metal_found + [o for o in non_metal + capacitive if claimable(o.cls, grid.sensors)]
 
 
 NAMED_BY_CHANNEL = "metal_by_channel"  # feature flag: the class is the finding channel's, fusion could not tell
@@ -435,6 +455,18 @@ def _metal_named(obj: MapObject) -> MapObject:
         return obj
     cls = "fastener" if obj.kind == "point" else "metal"
     obj.cls, obj.confidence = cls, _metal_probability(obj)
+    obj.features[NAMED_BY_CHANNEL] = 1.0
+    return obj
+
+
+def _within_channels(obj: MapObject, channels: list[str]) -> MapObject:
+    """A metal object whose class needs a channel the record lacks (scanner.channels `needed_for`: a power
+    line needs the AC crest, telling a pipe from a cable too) as "metal", which its finding channel tells. A
+    line's kind of metal (cable, pipe or a sheet's straight ridge) is one decision, by the AC crest and the
+    inductive strength: where a pipe cannot be told, neither can sheet metal, and the line stays a line."""
+    if claimable(obj.cls, channels) and not (obj.kind == "line" and not claimable("metal_pipe", channels)):
+        return obj
+    obj.cls, obj.confidence = "metal", _metal_probability(obj) or obj.confidence
     obj.features[NAMED_BY_CHANNEL] = 1.0
     return obj
 

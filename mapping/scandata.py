@@ -9,6 +9,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from scanner.channels import NAMES as CHANNEL_NAMES
+
 
 @dataclass
 class ScanData:
@@ -23,6 +25,22 @@ class ScanData:
     @property
     def n_samples(self) -> int:
         return int(self.samples["time_s"].shape[0]) if "time_s" in self.samples else 0
+
+    @property
+    def cell_m(self) -> float | None:
+        """The cell size (m) of a gridded record, whose every sample covers exactly its cell (scanner.recorded:
+        meta `cell_m`); None for a scan's point samples."""
+        value = self.meta.get("cell_m")
+        return float(value) if isinstance(value, (int, float)) and np.isfinite(value) and value > 0 else None
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """The sensor channels the scan has: those its meta names (an imported record's, scanner.recorded),
+        else every channel of the scanner."""
+        named = self.meta.get("channels")
+        if isinstance(named, list):
+            return tuple(c for c in CHANNEL_NAMES if c in named)
+        return CHANNEL_NAMES
 
     @classmethod
     def from_scan(cls, source: str, samples: dict[str, NDArray], frame_rows: list[dict[str, Any]],

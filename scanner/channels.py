@@ -9,6 +9,7 @@ and in scanner.sensor_model's simulated readings.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 
@@ -31,25 +32,32 @@ class Channel:
     line_peaks: bool  # its 1-D peaks along a pass locate pipes and cables (its footprint is narrow enough)
     cmap: str  # matplotlib colour map of its plots
     units: str = "display units"
+    # Object classes no map may claim without this channel (a record lacking it names them less finely)
+    needed_for: tuple[str, ...] = ()
 
 
 INDUCTIVE = Channel(
     "inductive", 0, "inductive sensor", "metal (pipes, cables, screws, plates)",
     responds_to=("power_line", "metal_pipe", "metal", "fastener"),
     measures=("power_line", "metal_pipe", "metal", "fastener"),
-    footprint_sigma_m=0.011, saturating=True, two_sided=False, safety=True, line_peaks=True, cmap="viridis")
+    footprint_sigma_m=0.011, saturating=True, two_sided=False, safety=True, line_peaks=True, cmap="viridis",
+    # a pipe and a fastener are found by their metal; "not metal" is the inductive channel's claim alone
+    needed_for=("metal_pipe", "fastener", "non_metal"))
 CAPACITIVE = Channel(
     "capacitive", 1, "capacitive sensor", "water-filled plastic pipes, wood and cavities",
     # screws and nails are too small to show capacitively
     responds_to=("power_line", "metal_pipe", "metal", "non_metal", "cavity"),
     measures=("non_metal", "cavity"),
-    footprint_sigma_m=0.022, saturating=False, two_sided=True, safety=True, line_peaks=False, cmap="cividis")
+    footprint_sigma_m=0.022, saturating=False, two_sided=True, safety=True, line_peaks=False, cmap="cividis",
+    needed_for=("non_metal", "cavity"))
 AC = Channel(
     "ac", 2, "AC sensor", "live cables",
     # only live cables and metal coupled to them
     responds_to=("power_line", "metal_pipe", "metal"),
     measures=("power_line",),
-    footprint_sigma_m=0.004, saturating=True, two_sided=False, safety=False, line_peaks=True, cmap="magma")
+    footprint_sigma_m=0.004, saturating=True, two_sided=False, safety=False, line_peaks=True, cmap="magma",
+    # only a live cable's crest tells a cable from a pipe: without it both are "metal"
+    needed_for=("power_line", "metal_pipe"))
 
 CHANNELS: tuple[Channel, ...] = (INDUCTIVE, CAPACITIVE, AC)  # in `index` order
 NAMES: tuple[str, ...] = tuple(c.name for c in CHANNELS)
@@ -67,3 +75,10 @@ def by_name(name: str) -> Channel:
     except KeyError:
         raise KeyError(f"no sensor channel {name!r}; the scanner has {', '.join(NAMES)}") from None
 
+
+
+def claimable(cls: str, channels: Iterable[str]) -> bool:
+    """Whether a record with these channels (names) can tell an object of class cls: every channel the class
+    needs (`needed_for`) is among them."""
+    have = set(channels)
+    return all(c.name in have for c in CHANNELS if cls in c.needed_for)
