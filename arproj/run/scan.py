@@ -85,9 +85,9 @@ def scan_simulated(wall: Wall, settings: ScanSettings, log: ScanLog | None = Non
     from devices.sim import FaultConfig
     from scanner.hardware import simulated_devices
 
-    with simulated_devices(world, FaultConfig(rate=settings.faults, seed=settings.seed)) as (backend, g, s):
-        result = run_scan(wall, backend, robot, **options)
-        return SimulatedScan(result, sum((g.faults.counts + s.faults.counts).values()), backend.faults_recovered)
+    with simulated_devices(world, robot, FaultConfig(rate=settings.faults, seed=settings.seed)) as devices:
+        result = run_scan(wall, devices.backend, devices.robot, **options)
+        return SimulatedScan(result, devices.servers.faults_injected, devices.faults_recovered)
 
 
 def scan_and_map(wall: Wall, plan: str, seed: int, options: dict[str, Any] | None = None

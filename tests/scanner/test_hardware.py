@@ -34,13 +34,15 @@ def test_a_thousand_seeded_faults_lose_no_sample(small_wall):
     world, robot = simulated_site(small_wall, sensor, drives, 11)
     faults = FaultConfig(rate=0.03, seed=5, down_s=0.02, weights={
         "garbage": 0.3, "junk": 0.25, "truncate": 0.25, "drop": 0.1, "disconnect": 0.5})
-    with simulated_devices(world, faults, timeout_s=0.03, max_pass_attempts=30) as (backend, grbl, scanner):
-        result = run_scan(small_wall, backend, robot, plan_kind="dense", sensor=sensor, drives=drives)
-        injected = grbl.faults.counts + scanner.faults.counts
-        reconnects = grbl.connections + scanner.connections - 2
+    with simulated_devices(world, robot, faults, timeout_s=0.03, max_pass_attempts=30) as devices:
+        result = run_scan(small_wall, devices.backend, devices.robot, plan_kind="dense", sensor=sensor,
+                          drives=drives)
+        servers = devices.servers.servers
+        injected = servers["drives"].faults.counts + servers["scanner"].faults.counts
+        reconnects = servers["drives"].connections + servers["scanner"].connections - 2
     assert sum(injected.values()) >= 1000
     assert all(injected[k] > 0 for k in ("garbage", "junk", "truncate", "drop", "disconnect"))
-    assert reconnects >= 3 and backend.pass_restarts >= 3
+    assert reconnects >= 3 and devices.backend.pass_restarts >= 3
     for key, values in reference.samples.items():
         np.testing.assert_array_equal(result.samples[key], values, err_msg=key)
 
@@ -51,11 +53,18 @@ def test_serial_path_equals_in_process_path_for_an_adaptive_scan(small_wall):
     reference = run_scan(small_wall, DirectBackend(world), robot, plan_kind="adaptive", sensor=sensor,
                          drives=drives)
     world, robot = simulated_site(small_wall, sensor, drives, 2)
-    with simulated_devices(world) as (backend, _, _):
-        result = run_scan(small_wall, backend, robot, plan_kind="adaptive", sensor=sensor, drives=drives)
+    with simulated_devices(world, robot) as devices:
+        result = run_scan(small_wall, devices.backend, devices.robot, plan_kind="adaptive", sensor=sensor,
+                          drives=drives)
     assert result.n_passes == reference.n_passes > 5
-    np.testing.assert_array_equal(result.samples["inductive"], reference.samples["inductive"])
-    np.testing.assert_array_equal(result.samples["x_m"], reference.samples["x_m"])
+    for key, values in reference.samples.items():
+        np.testing.assert_array_equal(result.samples[key], values, err_msg=key)
+    # the frames too: the base's pose and covariance, the truth, and the laser's fix from its scans over the wire
+    assert [row.keys() for row in result.frames] == [row.keys() for row in reference.frames]
+    for row, ref in zip(result.frames, reference.frames, strict=True):
+        for key, value in ref.items():
+            np.testing.assert_array_equal(row[key], value, err_msg=key)
+    assert "laser_x_m" in reference.frames[0]
 
 
 def test_a_device_that_never_comes_back_is_reported_quickly(small_wall):
