@@ -37,7 +37,7 @@ from devices.robotbase import RobotBase
 from devices.sim import FaultConfig
 from devices.wallscanner import WallScanner
 from geometry.errors import InputError
-from scanner.laser import HEADS, LaserConfig, fix_from_scans, pose_from_fix
+from scanner.laser import HEADS, LaserConfig, Scan, fix_from_scans, pose_from_fix
 from scanner.plan import DriveConfig, FrameTarget, PassSpec, move_position, move_time
 from scanner.sensor_model import SensorConfig
 from scanner.sim.devices import SiteServers
@@ -187,9 +187,13 @@ class DeviceRobot:
         fix = None
         if self.laser is not None:
             laser = self.laser
-            scans = [self._retry(lambda head=head: laser.scan(head, frame.frame_id)) for head in HEADS]
+
+            def turn(head: str) -> Callable[[], Scan]:
+                return lambda: laser.scan(head, frame.frame_id)
+
+            scans = [self._retry(turn(head)) for head in HEADS]
             try:
-                fix = fix_from_scans(*scans, self.laser_cfg, seed=frame.frame_id)
+                fix = fix_from_scans(scans[0], scans[1], self.laser_cfg, seed=frame.frame_id)
             except InputError as err:
                 if self.base is None:  # nothing else says where the robot stands
                     raise DeviceError(f"frame {frame.frame_id}: the laser cannot fix the robot ({err})",

@@ -82,7 +82,7 @@ class SimRobot:
             scans = [simulated_head_scan(head, stop.true, stop.alignment, self.wall_width_m, self.laser, self.seed,
                                          frame.frame_id) for head in HEADS]
             try:
-                fix = fix_from_scans(*scans, self.laser, seed=frame.frame_id)
+                fix = fix_from_scans(scans[0], scans[1], self.laser, seed=frame.frame_id)
             except InputError:
                 fix = None  # no fix (walls not in view): the frame keeps its localization alone
         return FrameReport(commanded, stop.estimate, stop.cov, stop.true, fix)

@@ -3,6 +3,7 @@ hang."""
 
 import contextlib
 import time
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -131,3 +132,46 @@ def test_scanner_requests_have_ids_and_reject_bad_commands(small_wall):
             scanner.request("SELFDESTRUCT")
         with pytest.raises(ScannerError, match="ERR 4"):
             scanner.arm(0.0, 1)
+
+
+def test_a_recorded_scan_session_replays_byte_for_byte(small_wall, tmp_path):
+    """Record every byte of a faulty scan (record:// around each device's URL, spy://'s format), then scan again
+    against the recordings alone: the host must send the recorded bytes (replay:// checks each one) and gets
+    the same samples and frames; every recorded byte is played, every recorded reconnect made."""
+    from devices.recording import finish_replay
+    from scanner.hardware import DeviceRobot
+    from scanner.sim.devices import SiteServers
+
+    sensor, drives = SensorConfig(), DriveConfig()
+    # no "drop": a lost answer is waited for by the deadline, the one thing a replay could time differently
+    faults = FaultConfig(rate=0.04, seed=3, down_s=0.02, weights={"garbage": 0.3, "junk": 0.3, "truncate": 0.2,
+                                                                   "corrupt": 0.1, "disconnect": 0.3})
+    files = {name: tmp_path / f"{name}.spy" for name in ("drives", "scanner", "laser", "base")}
+
+    def scan(urls):
+        backend = DeviceBackend(urls["drives"], urls["scanner"], drives, sensor, timeout_s=0.3, realtime=False)
+        robot = DeviceRobot(urls["laser"], urls["base"], timeout_s=0.3)
+        try:
+            backend.start()
+            robot.start()
+            return run_scan(small_wall, backend, robot, plan_kind="adaptive", sensor=sensor, drives=drives)
+        finally:
+            backend.close()
+            robot.close()
+
+    world, robot = simulated_site(small_wall, sensor, drives, 6)
+    with SiteServers(world, robot, faults) as servers:
+        recorded = scan({name: f"record://{url}?file={files[name]}" for name, url in servers.urls.items()})
+        injected = sum((server.faults.counts for server in servers.servers.values()), Counter())
+        reconnects = sum(server.connections - 1 for server in servers.servers.values())
+    assert injected["disconnect"] > 0 and injected["garbage"] > 0 and injected["truncate"] > 0
+    assert reconnects >= injected["disconnect"]
+    replayed = scan({name: f"replay://{path}" for name, path in files.items()})
+    for key, values in recorded.samples.items():
+        np.testing.assert_array_equal(replayed.samples[key], values, err_msg=key)
+    for row, ref in zip(replayed.frames, recorded.frames, strict=True):
+        for key, value in ref.items():
+            np.testing.assert_array_equal(row[key], value, err_msg=key)
+    for path in files.values():
+        session = finish_replay(path)
+        assert session.left() == 0 and session.opened == len(session.connections), path.name
