@@ -175,3 +175,45 @@ def test_a_recorded_scan_session_replays_byte_for_byte(small_wall, tmp_path):
     for path in files.values():
         session = finish_replay(path)
         assert session.left() == 0 and session.opened == len(session.connections), path.name
+
+
+def test_an_operator_places_the_robot_and_the_laser_fixes_where(small_wall):
+    """No robot base: the operator is asked to place the robot for every frame (here a test operator who drives
+    the simulated base, so the simulated site knows where the robot truly stands) and the frame's pose is the
+    laser's fix with its covariance; the wall is measured as where the base places it."""
+    from devices.robotbase import RobotBase
+    from scanner.hardware import DeviceRobot
+    from scanner.sim.devices import SiteServers
+
+    sensor, drives = SensorConfig(), DriveConfig()
+    world, robot = simulated_site(small_wall, sensor, drives, 8)
+    reference = run_scan(small_wall, DirectBackend(world), robot, plan_kind="dense", sensor=sensor, drives=drives)
+    world, robot = simulated_site(small_wall, sensor, drives, 8)
+    placed = []
+    with SiteServers(world, robot) as servers, \
+            SerialLink(servers.urls["base"], CrcLineFramer(), "robot base", timeout_s=0.5) as base_link:
+        hands = RobotBase(base_link)
+
+        def operator(frame):
+            placed.append(frame.frame_id)
+            hands.go_to((frame.x_m, frame.y_m, 0.0), frame.frame_id)
+
+        backend = DeviceBackend(servers.urls["drives"], servers.urls["scanner"], drives, sensor, realtime=False)
+        on_site = DeviceRobot(servers.urls["laser"], None, operator=operator)
+        backend.start()
+        on_site.start()
+        result = run_scan(small_wall, backend, on_site, plan_kind="dense", sensor=sensor, drives=drives)
+        backend.close()
+        on_site.close()
+    assert placed == list(range(result.n_frames))
+    for key in ("inductive", "capacitive", "ac", "drive_u_m", "drive_v_m", "time_s"):
+        np.testing.assert_array_equal(result.samples[key], reference.samples[key], err_msg=key)
+    truth = reference.frames
+    for row, ref in zip(result.frames, truth, strict=True):
+        assert np.isnan(row.get("true_x_m", np.nan))  # nobody on hardware knows the truth
+        for axis, (est, sigma) in enumerate((("laser_x_m", "laser_x_sigma_m"), ("laser_y_m", "laser_y_sigma_m"),
+                                             ("laser_phi_rad", "laser_phi_sigma_rad"))):
+            assert row[("est_x_m", "est_y_m", "est_phi_rad")[axis]] == row[est]
+            assert row["cov"][axis, axis] == pytest.approx(row[sigma] ** 2)
+            true = ref[("true_x_m", "true_y_m", "true_phi_rad")[axis]]
+            assert abs(row[est] - true) < 4.5 * row[sigma], est
