@@ -29,13 +29,16 @@ from devices.errors import (
     RequestDamagedError,
 )
 from devices.grbl import GrblDrives, GrblError
+from devices.laser2d import Laser2D, LaserError
 from devices.link import Framer, LineFramer, SerialLink
 from devices.pelco_d import PanTiltHead, PelcoDFramer
+from devices.robotbase import RobotBase, RobotBaseError
 from devices.wallscanner import CrcLineFramer, ScannerError, WallScanner
 
 if "devices.urlhandler" not in serial.protocol_handler_packages:  # record:// and replay:// URLs
     serial.protocol_handler_packages.append("devices.urlhandler")
 
 __all__ = ["CrcLineFramer", "DeviceError", "DeviceRefusedError", "DeviceResetError", "DeviceTimeoutError",
-           "DisconnectedError", "FrameTimeoutError", "Framer", "GrblDrives", "GrblError", "LineFramer",
-           "PanTiltHead", "PelcoDFramer", "RequestDamagedError", "ScannerError", "SerialLink", "WallScanner"]
+           "DisconnectedError", "FrameTimeoutError", "Framer", "GrblDrives", "GrblError", "Laser2D", "LaserError",
+           "LineFramer", "PanTiltHead", "PelcoDFramer", "RequestDamagedError", "RobotBase", "RobotBaseError",
+           "ScannerError", "SerialLink", "WallScanner"]

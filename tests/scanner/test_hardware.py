@@ -217,3 +217,27 @@ def test_an_operator_places_the_robot_and_the_laser_fixes_where(small_wall):
             assert row["cov"][axis, axis] == pytest.approx(row[sigma] ** 2)
             true = ref[("true_x_m", "true_y_m", "true_phi_rad")[axis]]
             assert abs(row[est] - true) < 4.5 * row[sigma], est
+
+
+def test_the_laser_sends_its_scan_whole_through_faults_and_refuses_an_unknown_head(small_wall):
+    from devices.laser2d import Laser2D, LaserError
+    from scanner.laser import LaserConfig, simulated_head_scan
+    from scanner.sim.devices import LaserSim
+
+    world = SimWorld(small_wall, SensorConfig(), DriveConfig(), 4)
+    world.place_robot((0.1, 0.02, 0.004), (0.52, 0.01))
+    cfg = LaserConfig()
+    faults = FaultConfig(rate=0.2, seed=2, weights={"garbage": 0.4, "junk": 0.2, "truncate": 0.2, "corrupt": 0.2})
+    with DeviceServer(LaserSim(world, cfg), faults) as server, \
+            SerialLink(server.url, CrcLineFramer(), "laser", timeout_s=0.05) as link:
+        laser = Laser2D(link)
+        assert laser.heads() == ["H", "V"]
+        for head in ("H", "V"):
+            angles, ranges = laser.scan(head, tag=9)
+            want_angles, want = simulated_head_scan(head, world.true_pose, world.alignment, small_wall.width_m,
+                                                    cfg, 4, 9)
+            np.testing.assert_array_equal(angles, want_angles)
+            np.testing.assert_array_equal(ranges, want)  # NaN (no return) where the simulator had none
+        assert sum(server.faults.counts.values()) > 10 and laser.faults_recovered > 0
+        with pytest.raises(LaserError, match="ERR 4"):
+            laser.scan("X")
