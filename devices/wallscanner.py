@@ -2,11 +2,9 @@
 docs/scanner-protocol.md; the simulator in scanner/sim/devices.py speaks it, `arproj devices-check scanner URL`
 checks an implementation): its framing (`CrcLineFramer`) and the host's driver (`WallScanner`).
 
-Every line in both directions ends with `*CCCCCCCC`: the CRC-32 (zlib/IEEE) of all bytes before the `*`, eight
-upper-case hex digits (an NMEA-style XOR byte lets ~1/256 damaged lines through, and insertions of equal byte
-pairs always: too weak for "never a silently wrong sample").
-Requests start with `#<id> ` (id 1..65535, chosen by the host) and every response line repeats it, so a late
-answer to an earlier request can never be taken for the current one.
+Lines are CRC lines with request ids (devices/crclines.py, shared with the 2-D laser and the robot base):
+every line ends with `*CCCCCCCC`, the CRC-32 of the bytes before the `*`; requests start with `#<id> ` and every
+response line repeats it.
 
     host -> device                       device -> host
     #7 ID?*CRC                            #7 OK WALLSCAN <model> <firmware>*CRC
@@ -29,183 +27,59 @@ the device's own statement and is reported, not retried away.
 
 from __future__ import annotations
 
-import zlib
-from dataclasses import dataclass
-
 import numpy as np
 
-from devices.errors import DeviceError, DeviceRefusedError, DeviceResetError, RequestDamagedError
-from devices.link import LineFramer, SerialLink
+from devices.crclines import CrcLineFramer, Damaged, TaggedClient, checksum, frame_line, unframe_line
+from devices.errors import DeviceRefusedError
+from devices.link import SerialLink
+
+__all__ = ["COUNTS_MAX", "GET_CHUNK", "CrcLineFramer", "Damaged", "ScannerError", "WallScanner", "checksum",
+           "frame_line", "unframe_line"]
 
 GET_CHUNK = 200
 COUNTS_MAX = 1000
-
-
-def checksum(body: str) -> str:
-    return f"{zlib.crc32(body.encode('ascii', errors='replace')):08X}"
-
-
-def frame_line(body: str) -> str:
-    return f"{body}*{checksum(body)}"
-
-
-def unframe_line(line: str) -> str | None:
-    """The body of a line whose checksum is right, else None."""
-    star = line.rfind("*")
-    if star < 0 or len(line) - star != 9:
-        return None
-    body = line[:star]
-    return body if line[star + 1:].upper() == checksum(body) else None
-
-
-@dataclass(frozen=True)
-class Damaged:
-    """A line whose checksum is wrong (garbled, truncated, noise), as it arrived: a device answers it with
-    ERR 2 under the id it seems to carry, the host skips it."""
-
-    text: str
-
-
-class CrcLineFramer:
-    """Text lines that end in `*CCCCCCCC`: feed() gives the body of every sound line and Damaged for the rest;
-    encode() appends the checksum to a body."""
-
-    terminator = LineFramer.terminator
-    noise = LineFramer.noise
-
-    def __init__(self) -> None:
-        self._lines = LineFramer()
-
-    @property
-    def rejected_bytes(self) -> int:
-        return self._lines.rejected_bytes
-
-    def feed(self, data: bytes) -> list[str | Damaged]:
-        return [Damaged(line) if (body := unframe_line(line)) is None else body for line in self._lines.feed(data)]
-
-    def encode(self, frame: str) -> bytes:
-        return self._lines.encode(frame_line(frame))
-
-    def clear(self) -> None:
-        self._lines.clear()
 
 
 class ScannerError(DeviceRefusedError):
     """The wall scanner refused a request or reported impossible values."""
 
 
-class WallScanner:
+class WallScanner(TaggedClient):
     """Client of the wall scanner over a SerialLink framed by CrcLineFramer."""
 
+    refused = ScannerError
+    what = "scanner"
+
     def __init__(self, link: SerialLink[str | Damaged, str], retries: int = 8) -> None:
-        self.link = link
-        self.retries = retries
-        self._next_id = 1
-        self._seen_reconnects = link.reconnects
-        self._protocol_faults = 0
-
-    @property
-    def faults_recovered(self) -> int:
-        """Faults got over so far: the link's (timeouts, resends, reconnects) and the protocol's own."""
-        return self.link.faults_recovered + self._protocol_faults
-
-    def _new_id(self) -> int:
-        value = self._next_id
-        self._next_id = self._next_id % 65535 + 1
-        return value
-
-    def _check_reset(self) -> None:
-        if self.link.reconnects != self._seen_reconnects:
-            self._seen_reconnects = self.link.reconnects
-            raise DeviceResetError("scanner reconnected")
-
-    def request(self, command: str, multi: bool = False) -> list[list[str]]:
-        """Send `command`; return the answer's fields (one list per line; for multi, all lines up to END)."""
-        tag = ""
-        lines: list[list[str]] = []
-
-        def tagged_request() -> str:
-            nonlocal tag
-            tag = f"#{self._new_id()}"  # a fresh id per try: a late answer to an earlier try is ignored
-            lines.clear()
-            return f"{tag} {command}"
-
-        def answer(line: str | Damaged) -> list[list[str]] | None:
-            fields = line.split() if isinstance(line, str) else []
-            if len(fields) < 2 or fields[0] != tag:
-                self._protocol_faults += 1  # bad checksum, stale answer or noise
-                return None
-            if fields[1] == "ERR":
-                code = int(fields[2]) if len(fields) > 2 and fields[2].isdigit() else -1
-                if code == 2:  # our request arrived damaged
-                    raise RequestDamagedError(f"{command!r} -> {' '.join(fields[1:])}")
-                if code == 3:
-                    raise DeviceResetError("scanner lost its buffer")
-                raise ScannerError(f"scanner ({self.link.url}): {command!r} -> {' '.join(fields[1:])}")
-            lines.append(fields[1:])
-            return lines if not multi or fields[1] == "END" else None
-
-        with self.link.lock:
-            self._check_reset()
-            return self.link.exchange(tagged_request, answer, retries=self.retries,
-                                      on_reconnect=self._reconnected)
-
-    def _reconnected(self) -> DeviceResetError:
-        self._seen_reconnects = self.link.reconnects
-        return DeviceResetError("scanner reconnected")
-
-    def _ok_value(self, command: str) -> str:
-        fields = self.request(command)[0]
-        if fields[0] != "OK" or len(fields) < 2:
-            raise ScannerError(f"scanner ({self.link.url}): unexpected answer {' '.join(fields)!r} to {command!r}")
-        return fields[1]
+        super().__init__(link, retries)
 
     def identify(self) -> str:
         return " ".join(self.request("ID?")[0][1:])
 
     def clock_us(self) -> int:
-        return int(self._ok_value("CLK?"))
+        return int(self.ok_fields("CLK?", 1)[0])
 
     def arm(self, rate_hz: float, tag: int) -> int:
         """Start sampling; returns the device time (µs) of sample 0."""
-        return int(self._ok_value(f"ARM {rate_hz:g} {int(tag)}"))
+        return int(self.ok_fields(f"ARM {rate_hz:g} {int(tag)}", 1)[0])
 
     def disarm(self) -> int:
         """Stop sampling; returns the number of samples buffered."""
-        return int(self._ok_value("DISARM"))
+        return int(self.ok_fields("DISARM", 1)[0])
 
     def fetch(self, count: int) -> tuple[np.ndarray, np.ndarray]:
         """Samples 0..count-1 of the buffer: (t_us (n,) int64, counts (n, 3) int64). Missing ones re-fetched."""
-        t_us = np.full(count, -1, dtype=np.int64)
-        readings = np.zeros((count, 3), dtype=np.int64)
-        have = np.zeros(count, dtype=bool)
-        failures = 0
-        while failures <= self.retries:
-            missing = np.flatnonzero(~have)
-            if missing.size == 0:
-                return t_us, readings
-            before = int(have.sum())
-            first = int(missing[0])
-            chunk = min(GET_CHUNK, count - first)
-            for fields in self.request(f"GET {first} {chunk}", multi=True):
-                if fields[0] != "S" or len(fields) != 6:
-                    continue
-                try:
-                    k, t, a, b, c = (int(v) for v in fields[1:])
-                except ValueError:
-                    self._protocol_faults += 1
-                    continue
-                if not first <= k < first + chunk:
-                    continue
-                for name, value in (("inductive", a), ("capacitive", b), ("ac", c)):
-                    if not 0 <= value <= COUNTS_MAX:
-                        raise ScannerError(f"scanner ({self.link.url}) reported {name} = {value} counts in sample "
-                                           f"{k}, outside 0..{COUNTS_MAX}",
-                                           "the sensor may be faulty or saturated by metal at the device; "
-                                           "check it and resume")
-                t_us[k], readings[k] = t, (a, b, c)
-                have[k] = True
-            if int(have.sum()) == before:
-                failures += 1
-        raise DeviceError(f"scanner at {self.link.url}: samples {np.flatnonzero(~have)[:5].tolist()}… could not be "
-                        "read", "check the connection and resume")
+        def sample(fields: list[str]) -> list[tuple[int, tuple[int, ...]]]:
+            if fields[0] != "S" or len(fields) != 6:
+                return []
+            k, t, *readings = (int(v) for v in fields[1:])
+            for name, value in zip(("inductive", "capacitive", "ac"), readings, strict=True):
+                if not 0 <= value <= COUNTS_MAX:
+                    raise ScannerError(f"scanner ({self.link.url}) reported {name} = {value} counts in sample "
+                                       f"{k}, outside 0..{COUNTS_MAX}",
+                                       "the sensor may be faulty or saturated by metal at the device; "
+                                       "check it and resume")
+            return [(k, (t, *readings))]
+
+        rows = self.fetch_indexed(count, 4, GET_CHUNK, sample)
+        return rows[:, 0].copy(), rows[:, 1:].copy()

@@ -1,4 +1,5 @@
-"""Scanning with the real device stack (devices/): GRBL drives and the wall scanner over serial URLs.
+"""Scanning with the real device stack (devices/): GRBL drives, the wall scanner, the 2-D laser and the robot
+base over serial URLs (real ports, or the simulators `arproj devices serve` runs).
 
 `DeviceBackend.measure_pass` runs one pass as a real scan does: home if needed, rapid to the pass start, arm
 the scanner (its clock stamps sample 0 at the start of the measuring move), feed move at scan speed, wait until
@@ -8,26 +9,41 @@ device times into drive positions with the same trapezoidal profile GRBL runs. W
 a device reset is measured again from its start, so no sample is lost or duplicated; after `max_pass_attempts`
 the scan stops with a clear message (DeviceError) and can be resumed from its log.
 
-`simulated_devices(world, faults)` starts the GRBL and wall-scanner simulators on 127.0.0.1 and yields a
-backend connected to them through `socket://` URLs — the same code path as hardware.
+`DeviceRobot` places the robot for each frame: a robot base drives there (devices/robotbase.py) and reports its
+navigation stack's pose with the covariance, or the operator is told where to put the robot and confirms; then
+the laser's two heads (horizontal, vertical) each take a turn and `scanner.laser.fix_from_scans` fixes the frame
+against the side walls and the floor. Without a base the frame's pose is that fix, with its covariance.
+
+`simulated_devices(world, robot, faults)` starts the four simulators on 127.0.0.1 (scanner.sim.devices.SiteServers)
+and yields the backend and the robot connected to them through `socket://` URLs — the same code path as hardware,
+the same samples and frames as the in-process site (scanner.run.DirectBackend with the SimRobot).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 
+from devices.crclines import CrcLineFramer
 from devices.errors import DeviceError, DeviceResetError, DisconnectedError
 from devices.grbl import GrblDrives
+from devices.laser2d import Laser2D
 from devices.link import LineFramer, SerialLink
-from devices.sim import DeviceServer, FaultConfig
-from devices.wallscanner import CrcLineFramer, WallScanner
-from scanner.plan import DriveConfig, PassSpec, move_position, move_time
+from devices.robotbase import RobotBase
+from devices.sim import FaultConfig
+from devices.wallscanner import WallScanner
+from geometry.errors import InputError
+from scanner.laser import HEADS, LaserConfig, Scan, fix_from_scans, pose_from_fix
+from scanner.plan import DriveConfig, FrameTarget, PassSpec, move_position, move_time
 from scanner.sensor_model import SensorConfig
-from scanner.sim.devices import GRBL_STREAM, SCANNER_STREAM, GrblSim, WallScannerSim
-from scanner.sim.world import FrameReport, SimWorld
+from scanner.sim.devices import SiteServers
+from scanner.sim.world import FrameReport, SimRobot, SimWorld
+
+T = TypeVar("T")
 
 HINT = "check the cable and power of the device, then resume the scan from its log"
 
@@ -36,8 +52,7 @@ class DeviceBackend:
     """Measures passes with GRBL drives and a wall scanner (see the module docstring)."""
 
     def __init__(self, drives_url: str, scanner_url: str, drives: DriveConfig, sensor: SensorConfig,
-                 timeout_s: float = 0.5, max_pass_attempts: int = 12,
-                 place_robot_hook: Callable[[FrameReport], None] | None = None, realtime: bool = True) -> None:
+                 timeout_s: float = 0.5, max_pass_attempts: int = 12, realtime: bool = True) -> None:
         self.drives_cfg = drives
         self.sensor_cfg = sensor
         self.max_pass_attempts = max_pass_attempts
@@ -48,23 +63,16 @@ class DeviceBackend:
         self.grbl = GrblDrives(self.drive_link, homing_timeout_s=60.0 if realtime else timeout_s)
         self._uv = np.zeros(2)
         self.scanner = WallScanner(self.scanner_link)
-        self.place_robot_hook = place_robot_hook
         self.pass_restarts = 0
 
     def start(self) -> None:
-        for link in (self.drive_link, self.scanner_link):
-            try:
-                link.open()
-            except DisconnectedError:
-                link.reconnect()
+        _open(self.drive_link, self.scanner_link)
 
     @property
     def faults_recovered(self) -> int:
         return self.grbl.faults_recovered + self.scanner.faults_recovered + self.pass_restarts
 
     def place_robot(self, report: FrameReport) -> None:
-        if self.place_robot_hook is not None:
-            self.place_robot_hook(report)
         self.grbl.homed = False  # home the drives at every frame (the robot moved)
 
     def measure_pass(self, pass_id: int, spec: PassSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -110,26 +118,124 @@ class DeviceBackend:
         self.scanner_link.close()
 
 
+def _open(*links: SerialLink[Any, Any]) -> None:
+    for link in links:
+        try:
+            link.open()
+        except DisconnectedError:
+            link.reconnect()
+
+
+Operator = Callable[[FrameTarget], None]  # tells a person where to put the robot; returns once it stands there
+
+
+class DeviceRobot:
+    """The robot on hardware (see the module docstring): go_to(frame) -> FrameReport, as SimRobot's.
+
+    base_url : the robot base (None: `operator` places the robot); laser_url : the 2-D laser with heads H and V
+    (None: no fix; then a base is needed). A device reset during a step redoes the step, at most max_attempts
+    times."""
+
+    def __init__(self, laser_url: str | None, base_url: str | None, laser: LaserConfig | None = None,
+                 operator: Operator | None = None, timeout_s: float = 0.5, max_attempts: int = 12) -> None:
+        if base_url is None and (laser_url is None or operator is None):
+            raise InputError("the robot's frames need a robot base (--base URL), or an operator and the 2-D laser "
+                             "(--laser URL) to fix where the operator put it")
+        self.laser_cfg = laser or LaserConfig()
+        self.operator = operator
+        self.max_attempts = max_attempts
+        self.laser_link = None if laser_url is None else \
+            SerialLink(laser_url, CrcLineFramer(), "laser", timeout_s=timeout_s, hint=HINT)
+        self.base_link = None if base_url is None else \
+            SerialLink(base_url, CrcLineFramer(), "robot base", timeout_s=timeout_s, hint=HINT)
+        self.laser = None if self.laser_link is None else Laser2D(self.laser_link)
+        self.base = None if self.base_link is None else RobotBase(self.base_link)
+
+    def start(self) -> None:
+        _open(*(link for link in (self.laser_link, self.base_link) if link is not None))
+        if self.laser is not None:
+            heads = self._retry(self.laser.heads)
+            if not set(HEADS) <= set(heads):
+                raise DeviceError(f"the laser at {self.laser.link.url} has heads {heads}: the scanning robot needs "
+                                  f"{' and '.join(HEADS)} (horizontal and vertical)", HINT)
+
+    @property
+    def faults_recovered(self) -> int:
+        return sum(device.faults_recovered for device in (self.laser, self.base) if device is not None)
+
+    def _retry(self, step: Callable[[], T]) -> T:
+        last = ""
+        for _ in range(self.max_attempts):
+            try:
+                return step()
+            except DeviceResetError as reset:
+                last = str(reset)
+        raise DeviceError(f"the robot's devices reset {self.max_attempts} times in one step (last: {last})",
+                          "check power and cables, then resume the scan from its log")
+
+    def go_to(self, frame: FrameTarget) -> FrameReport:
+        commanded = (frame.x_m, frame.y_m, 0.0)
+        true = None
+        if self.base is not None:
+            base = self.base
+            self._retry(lambda: base.go_to(commanded, frame.frame_id))
+            estimate, cov = self._retry(base.pose)
+            true = self._retry(base.true_pose)
+        else:
+            assert self.operator is not None
+            self.operator(frame)
+        fix = None
+        if self.laser is not None:
+            laser = self.laser
+
+            def turn(head: str) -> Callable[[], Scan]:
+                return lambda: laser.scan(head, frame.frame_id)
+
+            scans = [self._retry(turn(head)) for head in HEADS]
+            try:
+                fix = fix_from_scans(scans[0], scans[1], self.laser_cfg, seed=frame.frame_id)
+            except InputError as err:
+                if self.base is None:  # nothing else says where the robot stands
+                    raise DeviceError(f"frame {frame.frame_id}: the laser cannot fix the robot ({err})",
+                                      "clear the laser's view of the side walls and the floor, then resume") from None
+        if self.base is None:
+            assert fix is not None
+            estimate, cov = pose_from_fix(fix)
+        return FrameReport(commanded, estimate, cov, true, fix)
+
+    def close(self) -> None:
+        for link in (self.laser_link, self.base_link):
+            if link is not None:
+                link.close()
+
+
+@dataclass
+class SimulatedDevices:
+    backend: DeviceBackend
+    robot: DeviceRobot
+    servers: SiteServers
+
+    @property
+    def faults_recovered(self) -> int:
+        return self.backend.faults_recovered + self.robot.faults_recovered
+
+
 @contextmanager
-def simulated_devices(world: SimWorld, faults: FaultConfig | None = None, timeout_s: float = 0.5,
-                      max_pass_attempts: int = 12) -> Iterator[tuple[DeviceBackend, DeviceServer, DeviceServer]]:
-    """Start both device simulators and connect a DeviceBackend to them (socket:// URLs on 127.0.0.1)."""
-    grbl_server = DeviceServer(GrblSim(world), faults, stream=GRBL_STREAM)
-    scanner_server = DeviceServer(WallScannerSim(world), faults, stream=SCANNER_STREAM)
-    grbl_server.start()
-    scanner_server.start()
-    assert world is not None
-
-    def place(report: FrameReport) -> None:
-        if report.true is not None:
-            world.place_robot(report.true)
-
-    backend = DeviceBackend(grbl_server.url, scanner_server.url, world.drives, world.sensor, timeout_s,
-                            max_pass_attempts, place, realtime=False)
+def simulated_devices(world: SimWorld, robot: SimRobot, faults: FaultConfig | None = None, timeout_s: float = 0.5,
+                      max_pass_attempts: int = 12) -> Iterator[SimulatedDevices]:
+    """Start the four device simulators on `world` and `robot` and connect a DeviceBackend and a DeviceRobot to
+    them (socket:// URLs on 127.0.0.1)."""
+    servers = SiteServers(world, robot, faults)
+    urls = servers.urls
+    backend = DeviceBackend(urls["drives"], urls["scanner"], world.drives, world.sensor, timeout_s,
+                            max_pass_attempts, realtime=False)
+    device_robot = DeviceRobot(urls["laser"], urls["base"], robot.laser, timeout_s=timeout_s,
+                               max_attempts=max_pass_attempts)
     try:
         backend.start()
-        yield backend, grbl_server, scanner_server
+        device_robot.start()
+        yield SimulatedDevices(backend, device_robot, servers)
     finally:
         backend.close()
-        grbl_server.stop()
-        scanner_server.stop()
+        device_robot.close()
+        servers.close()

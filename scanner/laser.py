@@ -16,8 +16,10 @@ the reference line the distance and angle. Standard deviations come from the lin
 propagated through the corner geometry), not assumed.
 
 Simulation (`simulate_scan_2d`): exact ray casting of the rectangle, Gaussian range noise, a fraction of
-outliers (returns from clutter in front of the surfaces: uniform between 5 % of and the true range),
-deterministic from the generator given.
+outliers (returns from clutter in front of the surfaces: uniform between 5 % of and the true range), ranges in
+whole millimetres as the laser's protocol sends them (devices/laser2d.py), deterministic from the generator given.
+`simulated_head_scan` is one head's turn on the simulated site (the in-process robot and the laser simulator give
+the same), `fix_from_scans` the fix of one turn of each head.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from devices.laser2d import ranges_from_mm, ranges_to_mm, ray_angles
 from geometry.errors import InputError
 from geometry.robust import best_hypothesis, draw_samples, refine
 
@@ -76,7 +79,7 @@ def simulate_scan_2d(x_m: float, standoff_m: float, yaw_rad: float, wall_width_m
     """One 360° scan from a laser standoff_m in front of the reference surface (wall or floor) at x_m, turned
     by yaw_rad; the rectangle is depth_m deep. Returns (angles (n,) rad in the laser frame, ranges (n,) m;
     NaN where nothing is within max_range_m)."""
-    angles = np.arange(-math.pi, math.pi, cfg.angular_step_rad)
+    angles = ray_angles(-math.pi, cfg.angular_step_rad, math.ceil(2 * math.pi / cfg.angular_step_rad - 1e-9))
     world = angles + yaw_rad
     d = np.column_stack([np.cos(world), np.sin(world)])
     o = np.array([x_m, standoff_m])
@@ -93,7 +96,7 @@ def simulate_scan_2d(x_m: float, standoff_m: float, yaw_rad: float, wall_width_m
     outlier = rng.random(angles.shape) < cfg.outlier_fraction
     ranges[outlier] = rng.uniform(0.05, 1.0, int(outlier.sum())) * np.minimum(best[outlier], cfg.max_range_m)
     ranges[~np.isfinite(best) | (ranges > cfg.max_range_m)] = np.nan
-    return angles, ranges
+    return angles, ranges_from_mm(ranges_to_mm(ranges))  # the device reports whole millimetres (devices/laser2d)
 
 
 def _ransac_line(p: NDArray[np.float64], direction: NDArray[np.float64], rng: np.random.Generator) -> NDArray[np.bool_]:
@@ -191,22 +194,63 @@ def measure_fix(angles: NDArray[np.float64], ranges: NDArray[np.float64], side_m
     return dict(zip(_LINE_KEYS, (value[0] - side_margin_m, sig[0], value[1], sig[1], value[2], sig[2]), strict=True))
 
 
+HEADS: tuple[str, ...] = ("H", "V")  # the horizontal laser (fix against the wall), the vertical one (the floor)
+Scan = tuple[NDArray[np.float64], NDArray[np.float64]]  # (angles (n,) rad, ranges (n,) m, NaN: no return)
+
+
+def draw_alignment(rng: np.random.Generator, cfg: LaserConfig) -> tuple[float, float]:
+    """How the robot really stands to the wall after aligning: (standoff m, yaw rad)."""
+    standoff = cfg.standoff_m + cfg.standoff_sigma_m * float(rng.standard_normal())
+    return standoff, cfg.yaw_sigma_rad * float(rng.standard_normal())
+
+
+def head_scan(head: str, pose: tuple[float, float, float], alignment: tuple[float, float], wall_width_m: float,
+              cfg: LaserConfig, rng: np.random.Generator) -> Scan:
+    """One turn of laser `head` (HEADS) with the frame at its true pose (x m, y m, φ rad) and the robot aligned
+    as `alignment` (standoff m, yaw rad)."""
+    x, y, phi = (float(v) for v in pose)
+    if head == "H":
+        return simulate_scan_2d(x, alignment[0], alignment[1], wall_width_m, cfg.room_depth_m, cfg, rng)
+    if head == "V":
+        return simulate_scan_2d(x, y + cfg.floor_margin_m, phi, wall_width_m, cfg.room_height_m, cfg, rng)
+    raise ValueError(f"no laser head {head!r}: the robot has {', '.join(HEADS)}")
+
+
+def simulated_head_scan(head: str, pose: tuple[float, float, float], alignment: tuple[float, float],
+                        wall_width_m: float, cfg: LaserConfig, seed: int, tag: int) -> Scan:
+    """head_scan with the noise of the simulated site's stream for (seed, frame tag, head): the in-process robot
+    and the laser simulator (scanner/sim/devices.py) give the same scan."""
+    rng = np.random.default_rng([seed, int(tag), 104 + HEADS.index(head)])
+    return head_scan(head, pose, alignment, wall_width_m, cfg, rng)
+
+
+def fix_from_scans(horizontal: Scan, vertical: Scan, cfg: LaserConfig, seed: int = 0) -> dict[str, float]:
+    """Both lasers' fix (dict of LASER_KEYS; x is the inverse-variance mean of both lasers' x) from one turn of
+    each; seed: their RANSAC's. Raises InputError when a laser cannot see its reference surface or side wall."""
+    h = measure_fix(*horizontal, cfg.side_margin_m, 2 * seed, "scanned wall")
+    v = measure_fix(*vertical, cfg.side_margin_m, 2 * seed + 1, "floor")
+    w = np.array([h["x_sigma"], v["x_sigma"]]) ** -2.0
+    return {"laser_x_m": float(w @ [h["x"], v["x"]] / w.sum()), "laser_x_sigma_m": float(w.sum() ** -0.5),
+            "laser_y_m": v["dist"] - cfg.floor_margin_m, "laser_y_sigma_m": v["dist_sigma"],
+            "laser_phi_rad": v["angle"], "laser_phi_sigma_rad": v["angle_sigma"],
+            "laser_dist_m": h["dist"], "laser_dist_sigma_m": h["dist_sigma"],
+            "laser_yaw_rad": h["angle"], "laser_yaw_sigma_rad": h["angle_sigma"]}
+
+
+def pose_from_fix(fix: dict[str, float]) -> tuple[tuple[float, float, float], NDArray[np.float64]]:
+    """The frame pose (x m, y m, φ rad) a laser fix gives and its (3, 3) covariance (the coordinates' σ², the
+    fix's correlations not kept): the robot's pose where no navigation stack reports one."""
+    pose = (fix["laser_x_m"], fix["laser_y_m"], fix["laser_phi_rad"])
+    sigma = np.array([fix["laser_x_sigma_m"], fix["laser_y_sigma_m"], fix["laser_phi_sigma_rad"]])
+    return pose, np.diag(sigma**2)
+
+
 def simulate_fix(pose: tuple[float, float, float], wall_width_m: float, rng: np.random.Generator,
                  cfg: LaserConfig | None = None) -> tuple[dict[str, float], tuple[float, float]]:
-    """A simulated robot alignment with the frame at its true pose (x m, y m, φ rad): the fix of both lasers
-    (dict of LASER_KEYS; x is the inverse-variance mean of both lasers' x) and the true (standoff m, yaw rad)."""
+    """A simulated robot alignment with the frame at its true pose (x m, y m, φ rad), all drawn from one
+    generator: the fix of both lasers (fix_from_scans) and the true (standoff m, yaw rad)."""
     cfg = cfg or LaserConfig()
-    x, y, phi = (float(v) for v in pose)
-    standoff = cfg.standoff_m + cfg.standoff_sigma_m * float(rng.standard_normal())
-    yaw = cfg.yaw_sigma_rad * float(rng.standard_normal())
-    angles, ranges = simulate_scan_2d(x, standoff, yaw, wall_width_m, cfg.room_depth_m, cfg, rng)
-    h = measure_fix(angles, ranges, cfg.side_margin_m, int(rng.integers(0, 2**31)), "scanned wall")
-    angles, ranges = simulate_scan_2d(x, y + cfg.floor_margin_m, phi, wall_width_m, cfg.room_height_m, cfg, rng)
-    v = measure_fix(angles, ranges, cfg.side_margin_m, int(rng.integers(0, 2**31)), "floor")
-    w = np.array([h["x_sigma"], v["x_sigma"]]) ** -2.0
-    fix = {"laser_x_m": float(w @ [h["x"], v["x"]] / w.sum()), "laser_x_sigma_m": float(w.sum() ** -0.5),
-           "laser_y_m": v["dist"] - cfg.floor_margin_m, "laser_y_sigma_m": v["dist_sigma"],
-           "laser_phi_rad": v["angle"], "laser_phi_sigma_rad": v["angle_sigma"],
-           "laser_dist_m": h["dist"], "laser_dist_sigma_m": h["dist_sigma"],
-           "laser_yaw_rad": h["angle"], "laser_yaw_sigma_rad": h["angle_sigma"]}
-    return fix, (standoff, yaw)
+    alignment = draw_alignment(rng, cfg)
+    horizontal = head_scan("H", pose, alignment, wall_width_m, cfg, rng)
+    vertical = head_scan("V", pose, alignment, wall_width_m, cfg, rng)
+    return fix_from_scans(horizontal, vertical, cfg, int(rng.integers(0, 2**30))), alignment

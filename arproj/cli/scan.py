@@ -1,17 +1,36 @@
-"""`arproj scan`: scan a wall (simulated site) into a crash-safe scan log; `--resume LOG` continues one."""
+"""`arproj scan`: scan a wall (the simulated site, or the devices at their URLs) into a crash-safe scan log;
+`--resume LOG` continues one."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from geometry.errors import InputError
 
+if TYPE_CHECKING:
+    from scanner.plan import FrameTarget
+
 
 def _fmt_duration(seconds: float) -> str:
     seconds = round(seconds)
     return f"{seconds // 3600}:{seconds % 3600 // 60:02d}:{seconds % 60:02d}"
+
+
+def _ask_operator(frame: FrameTarget) -> None:
+    """Tell the operator where the robot goes for `frame` and wait until they press Enter."""
+    from arproj.console import console
+
+    console.print(f"frame {frame.frame_id}: put the robot at x = {frame.x_m:.3f} m along the wall (column "
+                  f"{frame.column}), the drive frame raised to y = {frame.y_m:.3f} m (band {frame.band}), aligned "
+                  "to the wall, then press Enter", highlight=False)
+    try:
+        input()
+    except EOFError:
+        raise InputError(f"frame {frame.frame_id}: nobody at the terminal to place the robot (input closed)",
+                         "run the scan at a terminal, or give the robot base's URL with --base") from None
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
@@ -22,8 +41,22 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                   "demo_brick_wall). With --resume it is checked against the log."),
         log: Path = typer.Option(None, "--log", help="Scan log to write (SQLite)."),
         resume: Path = typer.Option(None, "--resume", help="Continue the scan recorded in this log."),
-        sim: bool = typer.Option(False, "--sim", help="Scan the simulated site (device simulators on "
-                                 "socket:// URLs, the same code path as hardware)."),
+        sim: bool = typer.Option(False, "--sim", help="Scan the simulated site: starts the device simulators "
+                                 "`arproj devices serve` runs (in this process, on socket:// URLs) and scans "
+                                 "them by the hardware's code path."),
+        drives: str = typer.Option(None, "--drives", help="Hardware: pyserial URL of the GRBL drives "
+                                   "(/dev/ttyUSB0, socket://host:port, ...)."),
+        scanner_url: str = typer.Option(None, "--scanner", help="Hardware: URL of the wall scanner."),
+        laser: str = typer.Option(None, "--laser", help="Hardware: URL of the 2-D laser (heads H and V): fixes "
+                                  "each frame against the side walls and the floor."),
+        base: str = typer.Option(None, "--base", help="Hardware: URL of the robot base. Without it the command "
+                                 "says where to put the robot for each frame and waits for Enter; the frame's "
+                                 "pose is then the laser's fix."),
+        virtual_clock: bool = typer.Option(False, "--virtual-clock", help="Hardware: the devices are simulators "
+                                           "running motion on a virtual clock (`arproj devices serve`): wait for "
+                                           "a lost answer by the link's timeout, not the motion's time."),
+        device_timeout: float = typer.Option(0.5, "--device-timeout", help="Hardware: seconds to wait for one "
+                                             "answer line before asking again."),
         plan: str = typer.Option("adaptive", "--plan", help="dense (raster, 1 cm lines: the paper's way) or "
                                  "adaptive (coarse grid, then confirm and trace; DIN 18015-3 installation zones "
                                  "and the wall file's known sockets and openings order its passes, never replace "
@@ -45,25 +78,46 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     ) -> None:
         """Scan a wall: frames, passes and every sample go to a SQLite log, batch by batch (kill -9 safe)."""
         from arproj.console import console, progress_bar
-        from arproj.run.scan import ScanSettings, new_scan_log, resolve_wall, scan_simulated
+        from arproj.run.scan import (
+            DeviceUrls,
+            ScanSettings,
+            new_scan_log,
+            resolve_wall,
+            scan_on_devices,
+            scan_simulated,
+        )
         from scanner.run import open_for_resume
 
         if not 0.0 <= faults <= 0.5:
             raise InputError(f"--faults = {faults}: must be a probability between 0 and 0.5")
+        urls = None
+        if any(u is not None for u in (drives, scanner_url, laser, base)):
+            if sim:
+                raise InputError("give --sim or the devices' URLs (--drives, --scanner, --laser, --base), not both")
+            if drives is None or scanner_url is None:
+                raise InputError("scanning on devices needs --drives URL and --scanner URL, and --laser URL "
+                                 "(and --base URL, or an operator who places the robot)")
+            if base is None and laser is None:
+                raise InputError("without --base the operator places the robot and the laser fixes where: "
+                                 "give --laser URL")
+            if not 0.01 <= device_timeout <= 60:
+                raise InputError(f"--device-timeout = {device_timeout:g} s: must lie between 0.01 and 60")
+            urls = DeviceUrls(drives, scanner_url, laser, base)
         if resume is not None:
             if log is not None:
                 raise InputError("give either --resume LOG or --log LOG, not both")
             scan_log, the_wall = open_for_resume(resume, wall)
-            settings = ScanSettings.from_log(scan_log.meta, resume)
+            settings = ScanSettings.from_log(scan_log.meta, resume, on_devices=urls is not None)
             if scan_log.meta.get("status") == "complete":
                 console.print(f"{resume}: scan already complete ({scan_log.pass_count()} passes)")
                 return
         else:
             if wall is None or log is None:
                 raise InputError("arproj scan needs --wall FILE and --log LOG (or --resume LOG)")
-            if not sim:
-                raise InputError("only the simulated site can be scanned from this command: add --sim",
-                                 "real devices are driven by scanner.hardware.DeviceBackend with their serial URLs")
+            if not sim and urls is None:
+                raise InputError("arproj scan needs --sim (the simulated site) or the devices' URLs",
+                                 "e.g. --drives /dev/ttyUSB0 --scanner /dev/ttyUSB1 --laser /dev/ttyUSB2 "
+                                 "--base /dev/ttyUSB3, or those `arproj devices serve` prints")
             if plan not in ("dense", "adaptive"):
                 raise InputError(f"--plan = {plan!r}: use dense or adaptive")
             the_wall, wall = resolve_wall(wall)
@@ -73,23 +127,31 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                  "fasteners too")
             settings = ScanSettings(plan=plan, plan_options={"priors": priors, "coarse_row_spacing_m": row_spacing}
                                     if plan == "adaptive" else None, seed=seed)
-            scan_log = new_scan_log(log, the_wall, str(wall), settings, overwrite=overwrite)
+            scan_log = new_scan_log(log, the_wall, str(wall), settings, overwrite=overwrite, simulated=urls is None)
         settings.serial, settings.faults = not fast, faults
-        with progress_bar() as bar:
-            task = bar.add_task("scanning", total=1.0)
+        if urls is not None and base is None:  # an operator at the terminal: no progress bar over the prompts
+            scan = scan_on_devices(the_wall, settings, urls, scan_log, operator=_ask_operator,
+                                   realtime=not virtual_clock, timeout_s=device_timeout)
+        else:
+            with progress_bar() as bar:
+                task = bar.add_task("scanning", total=1.0)
 
-            def progress(t: float, total: float, passes: int) -> None:
-                bar.update(task, completed=t, total=total,
-                           description=f"scan {_fmt_duration(t)}/~{_fmt_duration(total)}")
+                def progress(t: float, total: float, passes: int) -> None:
+                    bar.update(task, completed=t, total=total,
+                               description=f"scan {_fmt_duration(t)}/~{_fmt_duration(total)}")
 
-            scan = scan_simulated(the_wall, settings, scan_log, progress)
+                scan = scan_simulated(the_wall, settings, scan_log, progress) if urls is None else \
+                    scan_on_devices(the_wall, settings, urls, scan_log, progress, realtime=not virtual_clock,
+                                    timeout_s=device_timeout)
         result = scan.result
-        if settings.serial and faults > 0:
+        if urls is not None:
+            console.print(f"device faults recovered: {scan.faults_recovered}")
+        elif settings.serial and faults > 0:
             console.print(f"device faults injected: {scan.faults_injected}, recovered: {scan.faults_recovered}")
         n = len(result.samples.get("time_s", []))
         console.print(f"{scan_log.path}: {result.n_frames} frames, {result.n_passes} passes "
-                      f"({result.measured_passes} measured now), {n} samples; simulated scan time "
-                      f"{_fmt_duration(result.scan_time_s)} ({settings.plan})")
+                      f"({result.measured_passes} measured now), {n} samples; {'' if urls else 'simulated '}scan "
+                      f"time {_fmt_duration(result.scan_time_s)} ({settings.plan})")
         if result.plan_report or result.plan_priors:
             from scanner.plan import PRIORS_RULE, STOPPING_RULE
 

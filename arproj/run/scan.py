@@ -1,8 +1,9 @@
-"""Scans on the simulated site, as `arproj scan`, `arproj demo` and the benchmarks run them.
+"""Scans on the simulated site or on devices, as `arproj scan`, `arproj demo` and the benchmarks run them.
 
 The scan itself is `scanner.run.run_scan`; what is set up around it here — the wall by file or shipped name,
-the settings a new log records and a resumed one restores, the device simulators (or the in-process site) — was
-written out again by each of those callers.
+the settings a new log records and a resumed one restores, the device simulators (or the in-process site), the
+devices at their URLs (`scan_on_devices`: real ports or `arproj devices serve`) — was written out again by each
+of those callers.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ from typing import Any
 from geometry.errors import InputError
 from mapping.pipeline import MapResult, build_map
 from mapping.scandata import ScanData
+from scanner.hardware import DeviceBackend, DeviceRobot, Operator
+from scanner.laser import LaserConfig
 from scanner.log import ScanLog
 from scanner.plan import DriveConfig, make_planner
 from scanner.run import DirectBackend, ProgressFn, ScanResult, config_from_meta, run_scan, scan_meta, simulated_site
@@ -47,31 +50,48 @@ class ScanSettings:
     drives: DriveConfig = field(default_factory=DriveConfig)
 
     @classmethod
-    def from_log(cls, meta: dict[str, Any], path: str | Path) -> ScanSettings:
-        """The settings a simulated scan's log was made with (to resume it); InputError for a hardware log."""
-        if meta.get("seed") is None:
-            raise InputError(f"{path}: the log was not made on the simulated site; resuming hardware scans "
-                             "needs the devices' URLs, which this command does not take yet")
+    def from_log(cls, meta: dict[str, Any], path: str | Path, on_devices: bool = False) -> ScanSettings:
+        """The settings a scan's log was made with (to resume it). A log made on devices resumes only on
+        devices (on_devices): InputError otherwise, and for a simulated log resumed on devices."""
+        hardware = meta.get("seed") is None
+        if hardware != on_devices:
+            raise InputError(f"{path}: the log was not made on the simulated site: resume it on the devices "
+                             "(--drives URL --scanner URL --laser URL [--base URL])" if hardware else
+                             f"{path}: the log was made on the simulated site: resume it with --sim")
         sensor, drives = config_from_meta(meta)
-        return cls(plan=meta["plan"]["kind"], plan_options=meta["plan"], seed=int(meta["seed"]), sensor=sensor,
-                   drives=drives)
+        return cls(plan=meta["plan"]["kind"], plan_options=meta["plan"], seed=0 if hardware else int(meta["seed"]),
+                   sensor=sensor, drives=drives)
 
 
 @dataclass
 class SimulatedScan:
+    """A scan on the simulated site or on devices, and what the serial path met on the way."""
+
     result: ScanResult
-    faults_injected: int = 0    # serial: faults the device simulators injected …
-    faults_recovered: int = 0   # … and those the device backend recovered from
+    faults_injected: int = 0    # serial: faults the device simulators injected (0 on devices: not known) …
+    faults_recovered: int = 0   # … and those the device backend and robot recovered from
+
+
+@dataclass(frozen=True)
+class DeviceUrls:
+    """Where the scanning robot's devices are (pyserial URLs). Without a base an operator places the robot."""
+
+    drives: str
+    scanner: str
+    laser: str | None = None
+    base: str | None = None
 
 
 def new_scan_log(path: str | Path, wall: Wall, wall_source: str, settings: ScanSettings,
-                 overwrite: bool = False) -> ScanLog:
-    """A new log for a simulated scan with `settings`; the plan's reach is checked before the file is made."""
+                 overwrite: bool = False, simulated: bool = True) -> ScanLog:
+    """A new log for a scan with `settings` (simulated: on the simulated site, which records its seed and wall;
+    else on devices); the plan's reach is checked before the file is made."""
     planner = make_planner(settings.plan, wall, settings.drives, settings.sensor.hysteresis_m,
                            settings.plan_options)
     planner.frames()
     return ScanLog.create(path, scan_meta(wall, wall_source, planner.describe(), settings.sensor, settings.drives,
-                                         settings.seed, simulated=True), overwrite=overwrite)
+                                         settings.seed if simulated else None, simulated=simulated),
+                          overwrite=overwrite)
 
 
 def scan_simulated(wall: Wall, settings: ScanSettings, log: ScanLog | None = None,
@@ -85,9 +105,29 @@ def scan_simulated(wall: Wall, settings: ScanSettings, log: ScanLog | None = Non
     from devices.sim import FaultConfig
     from scanner.hardware import simulated_devices
 
-    with simulated_devices(world, FaultConfig(rate=settings.faults, seed=settings.seed)) as (backend, g, s):
-        result = run_scan(wall, backend, robot, **options)
-        return SimulatedScan(result, sum((g.faults.counts + s.faults.counts).values()), backend.faults_recovered)
+    with simulated_devices(world, robot, FaultConfig(rate=settings.faults, seed=settings.seed)) as devices:
+        result = run_scan(wall, devices.backend, devices.robot, **options)
+        return SimulatedScan(result, devices.servers.faults_injected, devices.faults_recovered)
+
+
+def scan_on_devices(wall: Wall, settings: ScanSettings, urls: DeviceUrls, log: ScanLog | None = None,
+                    progress: ProgressFn | None = None, operator: Operator | None = None, realtime: bool = True,
+                    timeout_s: float = 0.5) -> SimulatedScan:
+    """Scan `wall` (its size and plan; what is inside it is measured) with the devices at `urls`, the hardware
+    code path `scan_simulated` runs on its simulators. realtime False: the devices run motion on a virtual clock
+    (`arproj devices serve`), so a lost answer is waited for by the link's timeout, not by the motion's time."""
+    backend = DeviceBackend(urls.drives, urls.scanner, settings.drives, settings.sensor, timeout_s,
+                            realtime=realtime)
+    robot = DeviceRobot(urls.laser, urls.base, LaserConfig(), operator, timeout_s)
+    try:
+        backend.start()
+        robot.start()
+        result = run_scan(wall, backend, robot, plan_kind=settings.plan, plan_options=settings.plan_options,
+                          sensor=settings.sensor, drives=settings.drives, log=log, progress=progress)
+    finally:
+        backend.close()
+        robot.close()
+    return SimulatedScan(result, 0, backend.faults_recovered + robot.faults_recovered)
 
 
 def scan_and_map(wall: Wall, plan: str, seed: int, options: dict[str, Any] | None = None

@@ -1,24 +1,33 @@
-"""Simulators of the GRBL drives and the wall scanner: SimDevices served by devices.sim.DeviceServer as
-`socket://127.0.0.1:PORT` serial URLs, with devices.sim's fault injector.
+"""Simulators of the scanning robot's devices — GRBL drives, wall scanner, robot base, 2-D laser — as SimDevices
+served by devices.sim.DeviceServer on `socket://127.0.0.1:PORT` serial URLs, with devices.sim's fault injector.
 
-Each speaks its device's protocol (devices/grbl.py, devices/wallscanner.py) so the host code is the same as
-with real hardware. Both share a SimWorld: the GRBL simulator executes moves on the world's virtual clock
-(integer microseconds; queued motion runs when the host waits with `G4 P0`), the scanner simulator samples the
-sensor model along the recorded motion. After a reconnect (a fault, or a new host) GRBL is in alarm until
-homed and the scanner's buffer is gone.
+Each speaks its device's protocol (devices/grbl.py, wallscanner.py, robotbase.py, laser2d.py) so the host code
+is the same as with real hardware. All share a SimWorld: the robot base simulator places the robot where the
+simulated platform stops (SimRobot.stop), the laser simulator scans the room from there, the GRBL simulator
+executes moves on the world's virtual clock (integer microseconds; queued motion runs when the host waits with
+`G4 P0`), the scanner simulator samples the sensor model along the recorded motion. After a reconnect (a fault,
+or a new host) GRBL is in alarm until homed and the scanner's and the laser's buffers are gone.
+`SiteServers` serves all four.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from devices.laser2d import RANGES_PER_LINE, ranges_to_mm
 from devices.link import LineFramer
+from devices.robotbase import covariance_fields
+from devices.sim import DeviceServer, FaultConfig
 from devices.sim.server import SimDevice
-from devices.wallscanner import CrcLineFramer, Damaged
+from devices.sim.tagged import TaggedLineSim
+from scanner.laser import HEADS, LaserConfig, simulated_head_scan
 from scanner.plan import move_time
-from scanner.sim.world import MotionSegment, SimWorld
+from scanner.sim.world import MotionSegment, RobotStop, SimRobot, SimWorld
 
-GRBL_STREAM, SCANNER_STREAM = 1, 2  # fault streams of the two simulators (the head's is 3)
+# fault streams of the simulators (the pan/tilt head's is 3, devices/sim/pelco_d.py)
+GRBL_STREAM, SCANNER_STREAM, BASE_STREAM, LASER_STREAM = 1, 2, 4, 5
 
 
 class GrblSim(SimDevice):
@@ -118,11 +127,10 @@ class GrblSim(SimDevice):
         return ["ok"]
 
 
-class WallScannerSim(SimDevice):
+class WallScannerSim(TaggedLineSim):
     """The wall scanner's protocol (devices/wallscanner.py) over the world's sensor model."""
 
     name = "wallscanner"
-    framer = CrcLineFramer
 
     def __init__(self, world: SimWorld) -> None:
         self.world = world
@@ -136,21 +144,7 @@ class WallScannerSim(SimDevice):
         self.armed_at = None
         self.buffer_t = self.buffer_counts = None
 
-    def handle(self, line: str | Damaged) -> list[str]:
-        if isinstance(line, Damaged):
-            words = line.text.split()
-            tag = words[0] if words and words[0].startswith("#") and words[0][1:].isdigit() else "#0"
-            return [f"{tag} ERR 2 bad checksum"]
-        words = line.split()
-        if len(words) < 2 or not words[0].startswith("#"):
-            return ["#0 ERR 1 unknown command"]
-        tag, command, args = words[0], words[1], words[2:]
-        try:
-            return self._dispatch(tag, command, args)
-        except (ValueError, IndexError):
-            return [f"{tag} ERR 4 bad argument"]
-
-    def _dispatch(self, tag: str, command: str, args: list[str]) -> list[str]:
+    def dispatch(self, tag: str, command: str, args: list[str]) -> list[str]:
         clock = self.world.clock_us
         if command == "ID?":
             return [f"{tag} OK WALLSCAN GMS120-SIM 1.0"]
@@ -186,3 +180,113 @@ class WallScannerSim(SimDevice):
             lines.append(f"{tag} END {max(0, last - first)}")
             return lines
         return [f"{tag} ERR 1 unknown command"]
+
+
+class RobotBaseSim(TaggedLineSim):
+    """The robot base's protocol (devices/robotbase.py): GOTO stops the simulated platform where SimRobot.stop
+    says for that frame tag and places the world's robot there; POSE? reports its localization, TRUE? the truth.
+    The base keeps its place across a reconnect (it does not move when its cable is replugged); a resent GOTO
+    stops where the first did (the stop is a function of the frame tag)."""
+
+    name = "robot base"
+
+    def __init__(self, world: SimWorld, robot: SimRobot) -> None:
+        self.world = world
+        self.robot = robot
+        self.stopped: RobotStop | None = None
+
+    def dispatch(self, tag: str, command: str, args: list[str]) -> list[str]:
+        if command == "ID?":
+            return [f"{tag} OK ROBOTBASE SIM 1.0"]
+        if command == "GOTO":
+            x, y, phi, frame = float(args[0]), float(args[1]), float(args[2]), int(args[3])
+            if not all(math.isfinite(v) for v in (x, y, phi)):
+                raise ValueError(args)
+            self.stopped = self.robot.stop(frame, (x, y, phi))
+            self.world.place_robot(self.stopped.true, self.stopped.alignment)
+            return [f"{tag} OK"]
+        if command == "STATE?":
+            return [f"{tag} OK IDLE"]  # the virtual clock: a move is over when it is commanded
+        if command == "POSE?":
+            if self.stopped is None:
+                return [f"{tag} OK 0.0 0.0 0.0 {' '.join(covariance_fields(np.zeros((3, 3))))}"]
+            pose = " ".join(repr(float(v)) for v in self.stopped.estimate)
+            return [f"{tag} OK {pose} {' '.join(covariance_fields(self.stopped.cov))}"]
+        if command == "TRUE?":
+            return [f"{tag} OK {' '.join(repr(float(v)) for v in self.world.true_pose)}"]
+        return [f"{tag} ERR 1 unknown command"]
+
+
+class LaserSim(TaggedLineSim):
+    """The 2-D laser's protocol (devices/laser2d.py) with the robot's two heads, scanning the simulated room from
+    where the world's robot stands (scanner.laser.simulated_head_scan)."""
+
+    name = "laser"
+
+    def __init__(self, world: SimWorld, laser: LaserConfig) -> None:
+        self.world = world
+        self.laser = laser
+        self.buffer: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self.buffer = None
+
+    def dispatch(self, tag: str, command: str, args: list[str]) -> list[str]:
+        if command == "ID?":
+            return [f"{tag} OK LASER2D SIM 1.0"]
+        if command == "HEADS?":
+            return [f"{tag} OK {' '.join(HEADS)}"]
+        if command == "SCAN":
+            head, frame = args[0], int(args[1])
+            if head not in HEADS:
+                return [f"{tag} ERR 4 no head {head}"]
+            with self.world.lock:
+                pose, alignment = self.world.true_pose, self.world.alignment
+            angles, ranges = simulated_head_scan(head, pose, alignment, self.world.wall.width_m, self.laser,
+                                                 self.world.seed, frame)
+            self.buffer = ranges_to_mm(ranges)
+            return [f"{tag} OK {len(angles)} {float(angles[0])!r} {self.laser.angular_step_rad!r}"]
+        if command == "GET":
+            if self.buffer is None:
+                return [f"{tag} ERR 3 no buffer"]
+            first, count = int(args[0]), int(args[1])
+            if first < 0 or count < 0:
+                raise ValueError(args)
+            last = min(len(self.buffer), first + count)
+            lines = [f"{tag} R {k} {' '.join(str(int(v)) for v in self.buffer[k:min(last, k + RANGES_PER_LINE)])}"
+                     for k in range(first, last, RANGES_PER_LINE)]
+            return [*lines, f"{tag} END {max(0, last - first)}"]
+        return [f"{tag} ERR 1 unknown command"]
+
+
+class SiteServers:
+    """The scanning robot's four simulators on one SimWorld, each on its own DeviceServer (socket:// on
+    127.0.0.1) with its own fault stream; `urls` names them as `arproj scan` takes them."""
+
+    def __init__(self, world: SimWorld, robot: SimRobot, faults: FaultConfig | None = None) -> None:
+        self.servers: dict[str, DeviceServer] = {
+            "drives": DeviceServer(GrblSim(world), faults, stream=GRBL_STREAM),
+            "scanner": DeviceServer(WallScannerSim(world), faults, stream=SCANNER_STREAM),
+            "base": DeviceServer(RobotBaseSim(world, robot), faults, stream=BASE_STREAM),
+            "laser": DeviceServer(LaserSim(world, robot.laser), faults, stream=LASER_STREAM),
+        }
+        for server in self.servers.values():
+            server.start()
+
+    @property
+    def urls(self) -> dict[str, str]:
+        return {name: server.url for name, server in self.servers.items()}
+
+    @property
+    def faults_injected(self) -> int:
+        return sum(sum(server.faults.counts.values()) for server in self.servers.values())
+
+    def close(self) -> None:
+        for server in self.servers.values():
+            server.stop()
+
+    def __enter__(self) -> SiteServers:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

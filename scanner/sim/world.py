@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from geometry.errors import InputError
-from scanner.laser import LaserConfig, simulate_fix
+from scanner.laser import HEADS, LaserConfig, draw_alignment, fix_from_scans, simulated_head_scan
 from scanner.plan import DriveConfig, FrameTarget, frame_pose_apply, move_position
 from scanner.sensor_model import SensorConfig, SensorModel
 from scanner.wall import Wall
@@ -34,11 +34,26 @@ class FrameReport:
     laser: dict[str, float] | None = None  # the 2-D laser's fix (scanner.laser.LASER_KEYS), if any
 
 
+@dataclass(frozen=True)
+class RobotStop:
+    """Where the simulated platform stopped for a frame: its true pose, its localization's estimate with the
+    covariance, and how it really stands to the wall (standoff m, yaw rad: what the horizontal laser sees)."""
+
+    true: Pose
+    estimate: Pose
+    cov: np.ndarray  # (3, 3): x, y (m²), phi (rad²)
+    alignment: tuple[float, float]
+
+
 class SimRobot:
     """The platform: stops near the commanded frame pose; its localization estimates where it stopped; with
-    the room's wall width given, its 2-D laser also measures the frame's x against the side walls. A frame
-    the lift raised to another band stops with an error of its own too (the lift's play and the re-alignment;
-    nothing ties it to the band below, so stitching is not helped by an assumption)."""
+    the room's wall width given, its two 2-D lasers also fix the frame against the side walls and the floor. A
+    frame the lift raised to another band stops with an error of its own too (the lift's play and the
+    re-alignment; nothing ties it to the band below, so stitching is not helped by an assumption).
+
+    `stop` is what the robot base simulator (scanner/sim/devices.py) does on GOTO and `simulated_head_scan` what
+    the laser simulator does on SCAN, so go_to() here gives the same report as the hardware code path
+    (scanner.hardware.DeviceRobot) on those simulators."""
 
     def __init__(self, drives: DriveConfig, seed: int, wall_width_m: float | None = None,
                  laser: LaserConfig | None = None) -> None:
@@ -47,25 +62,30 @@ class SimRobot:
         self.wall_width_m = wall_width_m
         self.laser = laser or LaserConfig()
 
-    def go_to(self, frame: FrameTarget) -> FrameReport:
+    def stop(self, frame_id: int, commanded: Pose) -> RobotStop:
         d = self.drives
-        rng = np.random.default_rng([self.seed, frame.frame_id, 101])
-        commanded = (frame.x_m, frame.y_m, 0.0)  # y: the lift raises the drive frame to its band
+        rng = np.random.default_rng([self.seed, frame_id, 101])
         err = rng.standard_normal(6)
         true = (commanded[0] + d.robot_sigma_m * err[0], commanded[1] + d.robot_sigma_m * err[1],
-                d.robot_sigma_rad * err[2])
+                commanded[2] + d.robot_sigma_rad * err[2])
         estimate = (true[0] + d.loc_sigma_m * err[3], true[1] + d.loc_sigma_m * err[4],
                     true[2] + d.loc_sigma_rad * err[5])
         cov = np.diag([d.loc_sigma_m**2, d.loc_sigma_m**2, d.loc_sigma_rad**2])
+        alignment = draw_alignment(np.random.default_rng([self.seed, frame_id, 103]), self.laser)
+        return RobotStop(true, estimate, cov, alignment)
+
+    def go_to(self, frame: FrameTarget) -> FrameReport:
+        commanded = (frame.x_m, frame.y_m, 0.0)  # y: the lift raises the drive frame to its band
+        stop = self.stop(frame.frame_id, commanded)
         fix = None
-        if self.wall_width_m is not None:  # own stream: the pose draws above stay as they were
+        if self.wall_width_m is not None:
+            scans = [simulated_head_scan(head, stop.true, stop.alignment, self.wall_width_m, self.laser, self.seed,
+                                         frame.frame_id) for head in HEADS]
             try:
-                fix, _ = simulate_fix(true, self.wall_width_m,
-                                      np.random.default_rng([self.seed, frame.frame_id, 103]), self.laser)
+                fix = fix_from_scans(scans[0], scans[1], self.laser, seed=frame.frame_id)
             except InputError:
                 fix = None  # no fix (walls not in view): the frame keeps its localization alone
-
-        return FrameReport(commanded, estimate, cov, true, fix)
+        return FrameReport(commanded, stop.estimate, stop.cov, stop.true, fix)
 
 
 class SimWorld:
@@ -78,14 +98,17 @@ class SimWorld:
         self.drives = drives
         self.seed = seed
         self.true_pose: Pose = (0.0, 0.0, 0.0)
+        self.alignment: tuple[float, float] = (LaserConfig().standoff_m, 0.0)  # (standoff m, yaw rad) to the wall
         self.lock = threading.Lock()
 
         self.clock_us = 0  # virtual device clock (integer µs, so sample instants are exact)
         self.segments: list[MotionSegment] = []
 
-    def place_robot(self, true_pose: Pose) -> None:
+    def place_robot(self, true_pose: Pose, alignment: tuple[float, float] | None = None) -> None:
         with self.lock:
             self.true_pose = true_pose
+            if alignment is not None:
+                self.alignment = alignment
 
     def record_motion(self, segment: MotionSegment) -> None:
         with self.lock:
