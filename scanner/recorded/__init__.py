@@ -113,6 +113,8 @@ def import_table(path: str | Path, out: str | Path, fmt: str | None = None,
             "channels": record.channels}
     if record.cell_m is not None:
         meta["cell_m"] = record.cell_m
+    if Path(out).exists() and not overwrite:  # checked here: the log's own hint speaks of resuming a scan
+        raise InputError(f"{out}: already exists", "pass --overwrite to replace it, or choose another --out")
     log = ScanLog.create(out, meta, overwrite=overwrite)
     passes = 0
     with log:

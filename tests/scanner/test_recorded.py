@@ -126,4 +126,4 @@ def test_import_scan_command(tmp_path: Path) -> None:
     assert "gridded table, 3 samples in 2 passes, 50 mm cells; channels inductive; wall 0.1 x 0.1 m" in said
     again = runner.invoke(app, ["import-scan", str(tmp_path / "rec.txt"), "--out", str(tmp_path / "scan.db")])
     assert again.exit_code == 1 and isinstance(again.exception, InputError)
-    assert "a scan log already exists here" in str(again.exception)
+    assert "already exists" in str(again.exception) and "--overwrite" in str(again.exception)
