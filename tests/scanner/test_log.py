@@ -164,7 +164,7 @@ def test_a_writer_in_another_process_is_refused_and_its_lock_dies_with_it(tmp_pa
 def test_overwrite_replaces_only_a_scan_log(tmp_path):
     text = tmp_path / "notes.txt"
     text.write_text("my notes\n")
-    with pytest.raises(InputError, match="not a scan log.*--overwrite replaces only a scan log"):
+    with pytest.raises(InputError, match=r"not a scan log.*--overwrite replaces only a scan log"):
         ScanLog.create(text, {"wall_fingerprint": "abc"}, overwrite=True)
     assert text.read_text() == "my notes\n"
     other = tmp_path / "other.db"
@@ -193,7 +193,7 @@ def test_a_log_is_created_whole_or_not_at_all(tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         ScanLog.create(path, {"wall_fingerprint": "abc"})
     assert not path.exists() and (tmp_path / ".scan.db.creating").exists()
-    with pytest.raises(InputError, match="stopped while creating it.*start it afresh"):
+    with pytest.raises(InputError, match=r"stopped while creating it.*start it afresh"):
         ScanLog.open(path, writable=True)
     monkeypatch.setattr(os, "replace", real_replace)
     log = ScanLog.create(path, {"wall_fingerprint": "abc"})  # afresh: the leftover is replaced
