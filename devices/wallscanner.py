@@ -38,6 +38,7 @@ from devices.link import LineFramer, SerialLink
 
 GET_CHUNK = 200
 COUNTS_MAX = 1000
+LINE_BITS = 64 * 10  # the longest answer line (an S line is under 64 bytes) on the wire, 10 bits a byte
 
 
 def checksum(body: str) -> str:
@@ -118,10 +119,13 @@ class WallScanner:
             self._seen_reconnects = self.link.reconnects
             raise DeviceResetError("scanner reconnected")
 
-    def request(self, command: str, multi: bool = False) -> list[list[str]]:
-        """Send `command`; return the answer's fields (one list per line; for multi, all lines up to END)."""
+    def request(self, command: str, multi: int = 0) -> list[list[str]]:
+        """Send `command`; return the answer's fields (one list per line). multi > 0: the answer is up to that
+        many lines and END, all returned; a longer one is a fault and asked again, and the try's deadline grows
+        by the time those lines take on the wire."""
         tag = ""
         lines: list[list[str]] = []
+        timeout_s = self.link.timeout_s + multi * LINE_BITS / self.link.baudrate
 
         def tagged_request() -> str:
             nonlocal tag
@@ -142,12 +146,14 @@ class WallScanner:
                     raise DeviceResetError("scanner lost its buffer")
                 raise ScannerError(f"scanner ({self.link.url}): {command!r} -> {' '.join(fields[1:])}")
             lines.append(fields[1:])
+            if len(lines) > multi + 1:  # more than asked for: a device that keeps talking, not our answer
+                raise RequestDamagedError(f"{command!r} -> more than {multi} lines before END")
             return lines if not multi or fields[1] == "END" else None
 
         with self.link.lock:
             self._check_reset()
             return self.link.exchange(tagged_request, answer, retries=self.retries,
-                                      on_reconnect=self._reconnected)
+                                      on_reconnect=self._reconnected, timeout_s=timeout_s)
 
     def _reconnected(self) -> DeviceResetError:
         self._seen_reconnects = self.link.reconnects
@@ -186,7 +192,7 @@ class WallScanner:
             before = int(have.sum())
             first = int(missing[0])
             chunk = min(GET_CHUNK, count - first)
-            for fields in self.request(f"GET {first} {chunk}", multi=True):
+            for fields in self.request(f"GET {first} {chunk}", multi=chunk):
                 if fields[0] != "S" or len(fields) != 6:
                     continue
                 try:
