@@ -66,8 +66,9 @@ def main() -> None:
     """Console-script entry point."""
     from arproj.console import err_console
 
-    if threading.current_thread() is threading.main_thread() and \
-            signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when started with SIGINT ignored
+    previous = signal.getsignal(signal.SIGINT)
+    handled = threading.current_thread() is threading.main_thread() and previous is signal.default_int_handler
+    if handled:  # not when started with SIGINT ignored (or from a thread, or under another handler)
         signal.signal(signal.SIGINT, _interrupt_once)
     try:
         app()  # standalone: usage errors print a hint; typer turns KeyboardInterrupt into exit status 130
@@ -84,3 +85,6 @@ def main() -> None:
         if done.code == EXIT_INTERRUPTED:  # typer's exit status for a KeyboardInterrupt in a command
             err_console.print(f"\n{INTERRUPTED}", highlight=False, soft_wrap=True)
         raise
+    finally:
+        if handled:  # main() called in-process (tests): leave the caller's Ctrl-C as it was
+            signal.signal(signal.SIGINT, previous)
