@@ -128,7 +128,7 @@ class DeviceServer(threading.Thread):
             try:
                 other, address = self.listener.accept()
             except OSError:
-                return
+                return True  # the one who knocked is gone already
             self.refused += 1
             with other, contextlib.suppress(OSError):
                 other.sendall(BUSY_PREFIX + f"simulated {self.device.name} on port {self.port} already has a "
