@@ -171,6 +171,13 @@ class WriterLock:
         handle.flush()
         self._file = handle
 
+    def probe(self) -> None:
+        """Raise LogInUseError now if another process writes the log (a command checks this before its slow
+        set-up; the lock is taken for real when the log is opened)."""
+        if self.path.exists():
+            self.acquire()
+            self.release()
+
     def release(self) -> None:
         if self._file is None:
             return

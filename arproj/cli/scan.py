@@ -85,6 +85,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing log at --log."),
     ) -> None:
         """Scan a wall: frames, passes and every sample go to a SQLite log, batch by batch (kill -9 safe)."""
+        from scanner.log import WriterLock
+
+        for path in (resume, log):  # a log another scan is writing: refused before the slow set-up below
+            if path is not None:
+                WriterLock(path).probe()
         from arproj.console import console
         from arproj.run.scan import ScanSettings, new_scan_log, resolve_wall
         from scanner.run import open_for_resume
