@@ -23,6 +23,11 @@ err_console = Console(stderr=True)
 T = TypeVar("T")
 
 
+class Interrupted(Exception):  # noqa: N818 - what a person sees: "interrupted"
+    """Ctrl-C reached a command that says what it kept (`arproj demo`): the CLI prints the message as its one
+    line and exits with status 130."""
+
+
 def progress_bar() -> Progress:
     """A progress bar with count, elapsed time and an estimate of the time left (on stderr)."""
     return Progress(

@@ -47,6 +47,12 @@ MIN_PAIR_CORNERS = 6  # a pair needs this many corners seen by both cameras
 # Robust outlier test over the pairs: above the median by this many robust standard deviations (1.4826 MAD) …
 EPIPOLAR_OUTLIER_SIGMAS = 3.5
 EPIPOLAR_OUTLIER_MIN_PX = 0.15  # … and above this floor (good pairs of real cameras lie at 0.05-0.17 px)
+# quality gate: sub-pixel corners leave residuals of a few tenths of a pixel (OpenCV's sample pairs: 0.2 px RMS,
+# 0.11 px epipolar); a wrong board size or mixed-up images leaves tens to thousands. The limit grows with the
+# image, as blur and corner error in pixels do.
+GATE_MIN_PX = 1.0
+GATE_PER_DIAGONAL_PX = 1.0 / 1000.0  # limit = max(GATE_MIN_PX, this × the image diagonal in pixels)
+GATE_BASELINE_PER_DISTANCE = 2.0  # both cameras saw the board: a baseline past twice its distance cannot be
 
 
 @dataclass
@@ -117,6 +123,35 @@ class StereoCalibration:
                                      zip(self.pair_sources, self.per_pair_epipolar_px, strict=True)},
             "coverage": self.coverage,
         }
+
+
+def residual_limit_px(size: tuple[int, int]) -> float:
+    """The largest RMS / epipolar residual (px) a sound calibration of images of this size shows."""
+    return max(GATE_MIN_PX, GATE_PER_DIAGONAL_PX * float(np.hypot(*size)))
+
+
+def camera_quality_problems(calib: CameraCalibration) -> list[str]:
+    """Why a camera calibration is far outside its expected residuals (empty: it is not)."""
+    limit = residual_limit_px(calib.intrinsics.size)
+    if np.isfinite(calib.rms_px) and calib.rms_px <= limit:
+        return []
+    return [f"reprojection RMS {calib.rms_px:.2f} px (a sound one stays under {limit:.2f} px)"]
+
+
+def stereo_quality_problems(calib: StereoCalibration) -> list[str]:
+    """Why a stereo calibration is far outside its expected residuals or geometry (empty: it is not)."""
+    limit = residual_limit_px(calib.left.size)
+    problems = []
+    if not (np.isfinite(calib.rms_px) and calib.rms_px <= limit):
+        problems.append(f"reprojection RMS {calib.rms_px:.2f} px (a sound one stays under {limit:.2f} px)")
+    if not (np.isfinite(calib.epipolar_px_per_image) and calib.epipolar_px_per_image <= limit):
+        problems.append(f"epipolar error {calib.epipolar_px_per_image:.2f} px per image (under {limit:.2f} px)")
+    distances = [float(np.linalg.norm(T[:3, 3])) for T in calib.T_left_from_board]
+    distance = float(np.median(distances)) if distances else float("nan")
+    if not (np.isfinite(calib.baseline_m) and calib.baseline_m <= GATE_BASELINE_PER_DISTANCE * distance):
+        problems.append(f"baseline {calib.baseline_m:.3f} m, implausible with the board {distance:.2f} m away "
+                        f"(at most {GATE_BASELINE_PER_DISTANCE:g}x that, or one camera could not see it)")
+    return problems
 
 
 def _calib_flags(model: str) -> int:

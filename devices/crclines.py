@@ -24,6 +24,8 @@ import numpy as np
 from devices.errors import DeviceError, DeviceRefusedError, DeviceResetError, RequestDamagedError
 from devices.link import LineFramer, SerialLink
 
+LINE_BITS = 64 * 10  # the longest answer line (an S line is under 64 bytes) on the wire, 10 bits a byte
+
 
 def checksum(body: str) -> str:
     return f"{zlib.crc32(body.encode('ascii', errors='replace')):08X}"
@@ -111,10 +113,13 @@ class TaggedClient:
         self._seen_reconnects = self.link.reconnects
         return DeviceResetError(f"{self.what} reconnected")
 
-    def request(self, command: str, multi: bool = False) -> list[list[str]]:
-        """Send `command`; return the answer's fields (one list per line; for multi, all lines up to END)."""
+    def request(self, command: str, multi: int = 0) -> list[list[str]]:
+        """Send `command`; return the answer's fields (one list per line). multi > 0: the answer is up to that
+        many lines and END, all returned; a longer one is a fault and asked again, and the try's deadline grows
+        by the time those lines take on the wire."""
         tag = ""
         lines: list[list[str]] = []
+        timeout_s = self.link.timeout_s + multi * LINE_BITS / self.link.baudrate
 
         def tagged_request() -> str:
             nonlocal tag
@@ -135,12 +140,14 @@ class TaggedClient:
                     raise DeviceResetError(f"{self.what} lost its state ({' '.join(fields[3:])})")
                 raise self.refused(f"{self.what} ({self.link.url}): {command!r} -> {' '.join(fields[1:])}")
             lines.append(fields[1:])
+            if len(lines) > multi + 1:  # more than asked for: a device that keeps talking, not our answer
+                raise RequestDamagedError(f"{command!r} -> more than {multi} lines before END")
             return lines if not multi or fields[1] == "END" else None
 
         with self.link.lock:
             self._check_reset()
             return self.link.exchange(tagged_request, answer, retries=self.retries,
-                                      on_reconnect=self._reconnected)
+                                      on_reconnect=self._reconnected, timeout_s=timeout_s)
 
     def ok_fields(self, command: str, count: int) -> list[str]:
         """The `count` fields after OK of a one-line answer; the protocol's refusal for any other answer."""
@@ -163,7 +170,7 @@ class TaggedClient:
             before = int(have.sum())
             first = int(missing[0])
             size = min(chunk, count - first)
-            for fields in self.request(f"GET {first} {size}", multi=True):
+            for fields in self.request(f"GET {first} {size}", multi=size):
                 try:
                     parsed = list(parse(fields))
                 except ValueError:

@@ -5,8 +5,10 @@ As pyserial's `threaded` module splits a connection from its Packetizer/LineRead
 deadlines and recovery, and a framer knows how frames sit in the byte stream: `LineFramer` (text lines, GRBL),
 the wall scanner's CRC lines (devices/wallscanner.py) and Pelco-D's 7-byte frames (devices/pelco_d.py). On top,
 `exchange()` is the one retry loop of every request/answer protocol, with a lock held for the whole exchange
-and a deadline on every read; it reconnects a device that went away. The protocols say only what their frames
-mean.
+and one deadline per try that nothing the device sends can extend (status lines, stale answers, noise); it
+reconnects a device that went away. Memory is bounded too: a "line" longer than MAX_LINE_BYTES is dropped, and
+a device that refuses a second host (BUSY_PREFIX, as the simulators do) is one clear DeviceError, not a
+reconnect loop. The protocols say only what their frames mean.
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ from devices.errors import DeviceError, DeviceTimeoutError, DisconnectedError, F
 
 POLL_S = 0.01  # granularity of the read deadline
 MAX_LINE_BYTES = 4096  # longer "lines" are garbage: dropped so a device spewing noise cannot exhaust memory
+BUSY_PREFIX = b"BUSY "  # a device (simulator) that already has a controlling host sends this line, then hangs up
+_TAIL_BYTES = 256  # the last bytes received, kept to read a BUSY line when the device hangs up
 
 # Framer[Received, Sent]: feed() gives Received frames, encode() takes Sent ones. Most protocols use one type both
 # ways; the wall scanner's framer gives strings or Damaged and sends strings.
@@ -122,6 +126,7 @@ class SerialLink(Generic[Received, Sent]):
         self.reconnects = 0  # protocols compare this to notice that the device was reset
         self._port: serial.SerialBase | None = None
         self._frames: deque[Received] = deque()
+        self._tail = b""
         self.faults_recovered = 0  # timeouts, resends and reconnects that exchange() got over
 
     # ------------------------------------------------------------------ connection
@@ -133,6 +138,7 @@ class SerialLink(Generic[Received, Sent]):
             raise DisconnectedError(f"cannot open the {self.name} at {self.url}: {err}", self.hint) from None
         self.framer.clear()
         self._frames.clear()
+        self._tail = b""
 
     def close(self) -> None:
         if self._port is not None:
@@ -165,32 +171,31 @@ class SerialLink(Generic[Received, Sent]):
     # ------------------------------------------------------------------ request / answer
     def exchange(self, request: Callable[[], Sent], answer: Callable[[Received], Answer | None], *, retries: int,
                  on_reconnect: Callable[[], Exception] | None = None, timeout_s: float | None = None,
-                 try_timeout_s: float | None = None, what: str | None = None) -> Answer:
+                 what: str | None = None) -> Answer:
         """Send request() and give each frame that comes back to answer() until it returns a value.
 
         answer returns None to keep listening (noise, a stale frame), raises RequestDamagedError when the
         device reports the request damaged, and raises the protocol's own errors for what a person must see.
-        A timeout or a RequestDamagedError sends a fresh request() again, at most `retries` times more, then
-        DeviceTimeoutError. timeout_s bounds the wait for each frame, try_timeout_s (if given) a whole try
-        whatever the device sends meanwhile. A disconnect reconnects; then, for a device that lost state the
-        protocol relied on, the error on_reconnect() returns is raised once the protocol has dropped that
-        state, else (on_reconnect None: nothing was lost) the request is tried again. Holds the lock for the
-        whole exchange, so no other request's frames are taken for ours. what names the request in errors
+        timeout_s (default: the link's) bounds each try whatever the device sends meanwhile: a device streaming
+        status lines or answers to other requests cannot keep it waiting. A timeout or a RequestDamagedError
+        sends a fresh request() again, at most `retries` times more, then DeviceTimeoutError: a request takes at
+        most (retries + 1) * timeout_s, plus reconnects. A disconnect reconnects; then, for a device that lost
+        state the protocol relied on, the error on_reconnect() returns is raised once the protocol has dropped
+        that state, else (on_reconnect None: nothing was lost) the request is tried again. Holds the lock for
+        the whole exchange, so no other request's frames are taken for ours. what names the request in errors
         (default: the frame's repr).
         """
         last_fault, frame = "", None
-        frame_s = self.timeout_s if timeout_s is None else timeout_s
+        try_s = self.timeout_s if timeout_s is None else timeout_s
         with self.lock:
             for _ in range(retries + 1):
                 try:
                     self.drain()
                     frame = request()
                     self.send(frame)
-                    try_deadline = None if try_timeout_s is None else time.monotonic() + try_timeout_s
+                    deadline = time.monotonic() + try_s
                     while True:
-                        deadline = time.monotonic() + frame_s
-                        value = answer(self.receive(deadline=deadline if try_deadline is None
-                                                    else min(deadline, try_deadline)))
+                        value = answer(self.receive(deadline=deadline))
                         if value is not None:
                             return value
                 except (FrameTimeoutError, RequestDamagedError) as fault:
@@ -203,7 +208,7 @@ class SerialLink(Generic[Received, Sent]):
                     if on_reconnect is not None:
                         raise on_reconnect() from None
         raise DeviceTimeoutError(f"{self.name} at {self.url} did not answer {what or repr(frame)} after {retries + 1} "
-                                 f"tries of {try_timeout_s or frame_s:.2g} s (last: {last_fault})", self.hint)
+                                 f"tries of {try_s:.2g} s (last: {last_fault})", self.hint)
 
     # ------------------------------------------------------------------ frames
     def send(self, frame: Sent) -> None:
@@ -233,10 +238,10 @@ class SerialLink(Generic[Received, Sent]):
             return []
         try:
             self._port.timeout = 0
-            self._frames.extend(self.framer.feed(self._port.read(65536)))
+            self._frames.extend(self.framer.feed(self._kept(self._port.read(65536))))
             self._port.timeout = POLL_S
         except (serial.SerialException, OSError) as err:
-            raise DisconnectedError(f"{self.name} at {self.url}: read failed ({err})") from None
+            raise self._gone(err) from None
         stale = list(self._frames)
         self._frames.clear()
         return stale
@@ -252,5 +257,20 @@ class SerialLink(Generic[Received, Sent]):
                 chunk += self._port.read(65536)
                 self._port.timeout = POLL_S
         except (serial.SerialException, OSError) as err:
-            raise DisconnectedError(f"{self.name} at {self.url}: read failed ({err})") from None
+            raise self._gone(err) from None
+        return self._kept(chunk)
+
+    def _kept(self, chunk: bytes) -> bytes:
+        if chunk:
+            self._tail = (self._tail + chunk)[-_TAIL_BYTES:]
         return chunk
+
+    def _gone(self, err: Exception) -> DeviceError:
+        """The error for a read that failed: the device's own refusal if it sent one (a BUSY line), else a
+        DisconnectedError that exchange() recovers from."""
+        busy = self._tail.rfind(BUSY_PREFIX)
+        if busy >= 0:
+            said = self._tail[busy + len(BUSY_PREFIX):].split(b"\n")[0].decode("ascii", errors="replace").strip()
+            return DeviceError(f"{self.name} at {self.url} refused this connection: {said}",
+                               "stop the other program that drives it, or give this one its own simulator")
+        return DisconnectedError(f"{self.name} at {self.url}: read failed ({err})")

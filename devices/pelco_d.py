@@ -198,7 +198,7 @@ class PanTiltHead:
             return None  # another head's frame, or a reply to another query
 
         return self.link.exchange(lambda: message(self.address, query_command), answer, retries=self.retries,
-                                  try_timeout_s=self.timeout_s, what=f"the {name} query")
+                                  timeout_s=self.timeout_s, what=f"the {name} query")
 
     # -- public API ------------------------------------------------------------------------------------
     def position(self) -> tuple[float, float]:

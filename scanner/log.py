@@ -55,6 +55,13 @@ Tables
           inductive REAL, capacitive REAL, ac REAL)           readings, display units 0..1 (device counts
                                                               / 1000), as in the paper's figures 5 and 6
 
+One writer: a log open for writing (`create`, `open(writable=True)`) holds an exclusive flock on the sidecar
+`LOG.lock` (the writer's pid and command line inside) until it is closed; a second writer is refused at once
+with a LogInUseError naming that pid. The OS drops the lock when its process ends however it ends (kill -9
+included), so it is never stale. Readers take no lock and keep working beside the writer (WAL). A new log is
+built whole in `.LOG.creating` (schema and meta in one transaction) and renamed to LOG, so a kill leaves either
+no log or a whole one; `overwrite` replaces only a file that is a scan log.
+
 Reader API: `ScanLog.open(path)`; `.meta` (dict), `.samples()` -> dict of numpy arrays (one per column above,
 float64 except seq/frame_id/pass_id/axis/direction int64; NULL -> NaN), `.frames()` -> dict of arrays with
 `cov` (n, 3, 3), `.passes()` -> dict of arrays (stage/axis as numpy str arrays).
@@ -62,8 +69,12 @@ float64 except seq/frame_id/pass_id/axis/direction int64; NULL -> NaN), `.frames
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
+import os
 import sqlite3
+import sys
 from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import Path
@@ -117,13 +128,74 @@ class DamagedLogError(InputError):
     reads what is left."""
 
 
+class LogInUseError(InputError):
+    """Another process holds the log open for writing."""
+
+
+class WriterLock:
+    """The one-writer lock of a log: an exclusive flock on the sidecar `LOG.lock`, which holds the writer's pid
+    and command line. The OS releases it when the process ends, however it ends; release() removes the file."""
+
+    def __init__(self, log_path: Path) -> None:
+        self.log_path = log_path
+        self.path = Path(f"{log_path}.lock")
+        self._file: Any = None  # the open lock file while held (a file object, so that GC closes a forgotten one)
+
+    def acquire(self) -> None:
+        """Take the lock at once or raise LogInUseError naming its holder (never waits)."""
+        while True:
+            try:
+                handle = open(self.path, "a+")  # noqa: SIM115 - held open while the lock is held
+            except OSError as err:
+                raise InputError(f"{self.log_path}: cannot create the writer lock {self.path} ({err.strerror})",
+                                 "check that the log's folder is writable") from None
+            try:
+                fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                handle.seek(0)
+                pid, _, command = handle.read(400).partition(" ")
+                handle.close()
+                holder = f"pid {pid.strip()}: {command.strip()}" if pid.strip().isdigit() else "pid unknown"
+                raise LogInUseError(f"{self.log_path}: another scan is writing this log ({holder})",
+                                    "wait for it to finish or stop it; two writers would mix two scans in one "
+                                    "log (reading it, e.g. `arproj map`, works meanwhile)") from None
+            try:  # the holder may have removed the file between our open and our flock: lock the new one
+                same = os.fstat(handle.fileno()).st_ino == os.stat(self.path).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            handle.close()
+        handle.truncate(0)
+        handle.write(f"{os.getpid()} {' '.join(sys.argv)[:300]}\n")
+        handle.flush()
+        self._file = handle
+
+    def probe(self) -> None:
+        """Raise LogInUseError now if another process writes the log (a command checks this before its slow
+        set-up; the lock is taken for real when the log is opened)."""
+        if self.path.exists():
+            self.acquire()
+            self.release()
+
+    def release(self) -> None:
+        if self._file is None:
+            return
+        with contextlib.suppress(FileNotFoundError):
+            self.path.unlink()  # while still locked: whoever opened it meanwhile retries on the new file
+        self._file.close()
+        self._file = None
+
+
 class ScanLog:
     """A scan log file (see the module docstring for the format). Use `create` to write, `open` to read."""
 
-    def __init__(self, path: Path, connection: sqlite3.Connection, writable: bool) -> None:
+    def __init__(self, path: Path, connection: sqlite3.Connection, writable: bool,
+                 lock: WriterLock | None = None) -> None:
         self.path = path
         self._db = connection
         self.writable = writable
+        self._lock = lock
         self.meta = self._read_meta()
         # columns the frames table really has (a version 1 log lacks the laser columns)
         present = {r[1] for r in connection.execute("PRAGMA table_info(frames)")}
@@ -132,25 +204,29 @@ class ScanLog:
     # ------------------------------------------------------------------ opening
     @classmethod
     def create(cls, path: str | Path, meta: Mapping[str, Any], overwrite: bool = False) -> ScanLog:
-        """Start a new log with the given meta entries (wall_fingerprint is required)."""
+        """Start a new log with the given meta entries (wall_fingerprint is required), whole or not at all.
+
+        Refuses (InputError) a path that holds a file unless overwrite, a file that is not a scan log even with
+        overwrite, and a log another process is writing (LogInUseError)."""
         path = Path(path)
-        if path.exists():
-            if not overwrite:
-                raise InputError(f"{path}: a scan log already exists here",
-                                 "continue it with `arproj scan --resume LOG` or choose another --log path")
-            for suffix in ("", "-wal", "-shm"):
-                Path(str(path) + suffix).unlink(missing_ok=True)
         if "wall_fingerprint" not in meta:
             raise ValueError("meta needs wall_fingerprint")
         path.parent.mkdir(parents=True, exist_ok=True)
-        db = _connect(path)
-        db.executescript(_SCHEMA)
-        entries = {"format": FORMAT, "created": datetime.now(UTC).isoformat(timespec="seconds"),
-                   "status": "running", **meta}
-        with db:
-            db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)",
-                           [(k, json.dumps(v)) for k, v in entries.items()])
-        return cls(path, db, writable=True)
+        lock = WriterLock(path)
+        lock.acquire()
+        try:
+            if path.exists() or path.is_symlink():
+                if not overwrite:
+                    raise InputError(f"{path}: a scan log already exists here",
+                                     "continue it with `arproj scan --resume LOG` or choose another --log path")
+                _check_is_scan_log(path)
+            entries = {"format": FORMAT, "created": datetime.now(UTC).isoformat(timespec="seconds"),
+                       "status": "running", **meta}
+            _build_whole(path, entries)
+            return cls(path, _connect(path), writable=True, lock=lock)
+        except BaseException:
+            lock.release()
+            raise
 
     @classmethod
     def open(cls, path: str | Path, writable: bool = False, salvage: bool = False) -> ScanLog:
@@ -159,24 +235,41 @@ class ScanLog:
         short. salvage=True (read-only) opens such a file anyway, so that its sound pages can be read."""
         path = Path(path)
         if not path.is_file():
+            if _creating_path(path).exists():
+                raise InputError(f"{path}: scan log not found; a scan was stopped while creating it, before any "
+                                 "pass was recorded", f"start it afresh with `arproj scan --log {path}`")
             raise InputError(f"{path}: scan log not found", "give the path passed to --log when scanning")
+        lock = None
+        if writable and not salvage:
+            lock = WriterLock(path)
+            lock.acquire()
         try:
-            db = _connect(path, readonly=not writable or salvage, salvage=salvage)
-            names = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        except sqlite3.DatabaseError as err:
-            if getattr(err, "sqlite_errorcode", None) == SQLITE_CORRUPT:
-                raise DamagedLogError(f"{path}: the scan log is damaged (SQLite says: {err})") from None
-            raise InputError(f"{path}: not a scan log (SQLite says: {err})") from None
-        if not {"meta", "frames", "passes", "samples"} <= names:
-            raise InputError(f"{path}: not a scan log (tables meta/frames/passes/samples missing)")
-        log = cls(path, db, writable)
-        if log.meta.get("format") not in READABLE_FORMATS:
-            raise InputError(f"{path}: meta format = {log.meta.get('format')!r}, expected one of "
-                             f"{sorted(READABLE_FORMATS)}", "is it a scan log from a newer arproj? update arproj")
-        return log
+            try:
+                db = _connect(path, readonly=not writable or salvage, salvage=salvage)
+                names = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+            except sqlite3.DatabaseError as err:
+                if getattr(err, "sqlite_errorcode", None) == SQLITE_CORRUPT:
+                    raise DamagedLogError(f"{path}: the scan log is damaged (SQLite says: {err})") from None
+                raise InputError(f"{path}: not a scan log (SQLite says: {err})") from None
+            if not {"meta", "frames", "passes", "samples"} <= names:
+                db.close()
+                raise InputError(f"{path}: not a scan log (tables meta/frames/passes/samples missing)")
+            log = cls(path, db, writable, lock)
+            if log.meta.get("format") not in READABLE_FORMATS:
+                log.close()
+                raise InputError(f"{path}: meta format = {log.meta.get('format')!r}, expected one of "
+                                 f"{sorted(READABLE_FORMATS)}", "is it a scan log from a newer arproj? update arproj")
+            return log
+        except BaseException:
+            if lock is not None:
+                lock.release()
+            raise
 
     def close(self) -> None:
         self._db.close()
+        if self._lock is not None:
+            self._lock.release()
+            self._lock = None
 
     def __enter__(self) -> ScanLog:
         return self
@@ -299,6 +392,54 @@ class ScanLog:
 
     def frame_ids(self) -> set[int]:
         return {int(r[0]) for r in self._db.execute("SELECT frame_id FROM frames")}
+
+
+def _creating_path(path: Path) -> Path:
+    """Where a new log is built before it is renamed into place (a kill leaves it here, never at path)."""
+    return path.with_name(f".{path.name}.creating")
+
+
+def _check_is_scan_log(path: Path) -> None:
+    """Raise InputError unless path is a scan log (sound or damaged) that `overwrite` may replace."""
+    if not path.is_file():
+        raise InputError(f"{path}: not a file; --overwrite replaces only a scan log", "choose another --log path")
+    try:
+        ScanLog.open(path).close()
+    except DamagedLogError:
+        return  # SQLite knows it as a database with damaged pages: a scan log cut short, replaceable
+    except InputError as err:
+        raise InputError(f"{err.message}; --overwrite replaces only a scan log, never another file",
+                         "remove the file yourself if it may go, or choose another --log path") from None
+
+
+def _build_whole(path: Path, entries: Mapping[str, Any]) -> None:
+    """Write a new log with its schema and meta in one transaction beside path, then rename it onto path (the
+    caller holds the writer lock). The old log's -wal/-shm go first: SQLite would replay them onto the new one."""
+    tmp = _creating_path(path)
+    for leftover in (tmp, Path(f"{tmp}-journal")):
+        leftover.unlink(missing_ok=True)
+    db = sqlite3.connect(str(tmp), isolation_level=None)
+    try:
+        db.execute("BEGIN")
+        for statement in _SCHEMA.split(";"):
+            if statement.strip():
+                db.execute(statement)
+        db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)",
+                       [(k, json.dumps(v)) for k, v in entries.items()])
+        db.execute("COMMIT")
+        db.execute("PRAGMA journal_mode=WAL")  # kept in the file's header
+    finally:
+        db.close()
+    with open(tmp, "rb+") as handle:
+        os.fsync(handle.fileno())
+    for suffix in ("-wal", "-shm"):
+        Path(f"{path}{suffix}").unlink(missing_ok=True)
+    os.replace(tmp, path)
+    directory = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(directory)
+    finally:
+        os.close(directory)
 
 
 def _connect(path: Path, readonly: bool = False, salvage: bool = False) -> sqlite3.Connection:

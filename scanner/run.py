@@ -274,15 +274,20 @@ def _estimate_total(planner: Any, targets: list[FrameTarget], drives: DriveConfi
 
 
 def open_for_resume(log_path: str | Path, wall_path: str | Path | None = None) -> tuple[ScanLog, Wall]:
-    """Open a log to continue it; the wall comes from --wall (checked against the log) or the log itself."""
+    """Open a log to continue it (as its one writer); the wall comes from --wall (checked against the log) or
+    the log itself. Whatever refuses it closes the log again, so its writer lock is never left held."""
     log = ScanLog.open(log_path, writable=True)
+    try:
+        return log, _resumable_wall(log, log_path, wall_path)
+    except BaseException:
+        log.close()
+        raise
+
+
+def _resumable_wall(log: ScanLog, log_path: str | Path, wall_path: str | Path | None) -> Wall:
     plan = log.meta.get("plan") or {}
     if plan.get("kind") == "adaptive":
-        try:
-            check_planner_version(plan, str(log_path), logged=True)
-        except InputError:
-            log.close()
-            raise
+        check_planner_version(plan, str(log_path), logged=True)
     if wall_path is not None:
         wall = load_wall(wall_path)
         log.check_wall(wall.fingerprint(), str(wall_path))
@@ -296,7 +301,7 @@ def open_for_resume(log_path: str | Path, wall_path: str | Path | None = None) -
                              "pass --wall FILE")
         wall = load_wall(path)
         log.check_wall(wall.fingerprint(), str(path))
-    return log, wall
+    return wall
 
 
 def simulated_site(wall: Wall, sensor: SensorConfig, drives: DriveConfig, seed: int) -> tuple[SimWorld, SimRobot]:

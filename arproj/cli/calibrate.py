@@ -24,6 +24,23 @@ if TYPE_CHECKING:
 BOARD_HELP = ("Board spec: chessboard:COLSxROWS:SQUARE_M (inner corners) or "
               "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT]; the square size in metres.")
 MODEL_HELP = "Distortion model: k1k2, k1k2k3, k1k2p1p2, k1k2p1p2k3."
+ACCEPT_POOR_HELP = ("Write the result even when its residuals are far outside what a sound calibration gives "
+                    "(by default it is refused and the earlier result kept).")
+STEREO_FILES = ("camera_left.yaml", "camera_right.yaml", "rig.yaml", "stereo_coverage.png")  # a stereo rig folder
+CAMERA_FILES = ("camera.yaml", "camera_quality.json")
+
+
+def _refuse_poor(problems: list[str], out: Path, accept_poor: bool) -> None:
+    """The quality gate: one line naming every figure far out of range; the earlier result stays."""
+    if not problems:
+        return
+    if accept_poor:
+        err_console.print(f"[yellow]warning:[/] written although poor (--accept-poor): {'; '.join(problems)}",
+                          highlight=False)
+        return
+    raise InputError(f"calibration refused: {'; '.join(problems)}; {out} is left as it was",
+                     "check --board: COLSxROWS counts inner corners (a board of 10x7 squares is 9x6) and the square "
+                     "size is in metres; --accept-poor writes it anyway")
 
 
 def _parse_size(text: str, option: str) -> tuple[int, int]:
@@ -36,14 +53,19 @@ def _parse_size(text: str, option: str) -> tuple[int, int]:
     return w, h
 
 
-def stereo_command(left: str, right: str, board_spec: str, out: Path, model: str, as_json: bool) -> dict:
-    """Run stereo calibration on image files and write the rig folder; returns the quality figures."""
+def stereo_command(left: str, right: str, board_spec: str, out: Path, model: str, as_json: bool,
+                   accept_poor: bool = False) -> dict:
+    """Run stereo calibration on image files and write the rig folder whole (refused, the earlier rig kept,
+    when its residuals or baseline are far out of range); returns the quality figures."""
+    from arproj.outputs import OutputFolder
     from calibration.boards import parse_board
     from calibration.image_sets import detect_stereo_set
     from calibration.plots import plot_stereo_coverage
-    from calibration.stereo import calibrate_stereo, coverage_advice
+    from calibration.stereo import calibrate_stereo, coverage_advice, stereo_quality_problems
     from geometry.rig import Rig
 
+    folder = OutputFolder(out, STEREO_FILES, "stereo rig folder")
+    folder.check()
     board = parse_board(board_spec)
     images = detect_stereo_set(left, right, board, track=lambda it, d, n: track(it, d, total=n))
     _warn_no_board(images.no_board, board)
@@ -53,13 +75,14 @@ def stereo_command(left: str, right: str, board_spec: str, out: Path, model: str
         if images.no_board:
             raise InputError(f"{err.message} (no board in: {', '.join(images.no_board)})", err.hint) from None
         raise
+    _refuse_poor(stereo_quality_problems(calib), out, accept_poor)
     rig = Rig(intrinsics={"camera_left": calib.left, "camera_right": calib.right},
               poses={"T_camera_right_from_camera_left": calib.T_right_from_left},
               quality={"stereo": calib.quality() | {"board": board_spec, "images_without_board": images.no_board}})
-    out.mkdir(parents=True, exist_ok=True)
-    rig.save(out)
-    plot_stereo_coverage(calib, [lv for lv in images.left if lv is not None],
-                         [rv for rv in images.right if rv is not None], out / "stereo_coverage.png")
+    with folder as tmp:
+        rig.save(tmp)
+        plot_stereo_coverage(calib, [lv for lv in images.left if lv is not None],
+                             [rv for rv in images.right if rv is not None], tmp / "stereo_coverage.png")
     figures = calib.quality()
     summary = {
         "out": str(out),
@@ -101,13 +124,18 @@ def _warn_no_board(names: list[str], board: Board) -> None:
                           highlight=False)
 
 
-def camera_command(images: str, board_spec: str, out: Path, model: str, as_json: bool) -> dict:
-    """Calibrate one camera from image files: writes OUT/camera.yaml and OUT/camera_quality.json."""
+def camera_command(images: str, board_spec: str, out: Path, model: str, as_json: bool,
+                   accept_poor: bool = False) -> dict:
+    """Calibrate one camera from image files: writes OUT/camera.yaml and OUT/camera_quality.json whole (refused,
+    the earlier ones kept, when the residuals are far out of range)."""
+    from arproj.outputs import OutputFolder
     from calibration.boards import parse_board
     from calibration.image_sets import detect_image_set
-    from calibration.stereo import calibrate_camera, coverage_advice
+    from calibration.stereo import calibrate_camera, camera_quality_problems, coverage_advice
     from geometry.intrinsics import write_camera_info
 
+    folder = OutputFolder(out, CAMERA_FILES, "camera folder")
+    folder.check()
     board = parse_board(board_spec)
     found = detect_image_set(images, board, track=lambda it, d, n: track(it, d, total=n))
     _warn_no_board(found.no_board, board)
@@ -117,10 +145,11 @@ def camera_command(images: str, board_spec: str, out: Path, model: str, as_json:
         if found.no_board:
             raise InputError(f"{err.message} (no board in: {', '.join(found.no_board)})", err.hint) from None
         raise
+    _refuse_poor(camera_quality_problems(calib), out, accept_poor)
     figures = calib.quality() | {"board": board_spec, "images_without_board": found.no_board}
-    out.mkdir(parents=True, exist_ok=True)
-    write_camera_info(out / "camera.yaml", calib.intrinsics, camera_name="camera")
-    (out / "camera_quality.json").write_text(json.dumps(figures, indent=2))
+    with folder as tmp:
+        write_camera_info(tmp / "camera.yaml", calib.intrinsics, camera_name="camera")
+        (tmp / "camera_quality.json").write_text(json.dumps(figures, indent=2))
     intr = calib.intrinsics
     summary = figures | {"out": str(out), "advice": coverage_advice(figures["coverage"]),
                          "camera": {"fx": intr.fx, "fy": intr.fy, "cx": intr.cx, "cy": intr.cy,
@@ -201,9 +230,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out", help="Rig folder: camera_left.yaml, camera_right.yaml, rig.yaml."),
         model: str = typer.Option("k1k2p1p2k3", "--model", help=MODEL_HELP),
         as_json: bool = typer.Option(False, "--json", help="Print the quality figures as JSON."),
+        accept_poor: bool = typer.Option(False, "--accept-poor", help=ACCEPT_POOR_HELP),
     ) -> None:
-        """Stereo calibration from image files; writes ROS camera_info files and the rig file."""
-        stereo_command(left, right, board, out, model, as_json)
+        """Stereo calibration from image files; writes ROS camera_info files and the rig file (refused, the
+        earlier rig kept, when its residuals or baseline are far out of range)."""
+        stereo_command(left, right, board, out, model, as_json, accept_poor)
 
     @calibrate_app.command("camera")
     def camera(
@@ -214,9 +245,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                  "camera_quality.json."),
         model: str = typer.Option("k1k2p1p2k3", "--model", help=MODEL_HELP),
         as_json: bool = typer.Option(False, "--json", help="Print the quality figures as JSON."),
+        accept_poor: bool = typer.Option(False, "--accept-poor", help=ACCEPT_POOR_HELP),
     ) -> None:
         """Calibrate one camera from image files (chessboard or ChArUco); writes a ROS camera_info file."""
-        camera_command(images, board, out, model, as_json)
+        camera_command(images, board, out, model, as_json, accept_poor)
 
     @calibrate_app.command("capture")
     def capture(

@@ -25,16 +25,15 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     ) -> None:
         """Run arproj end to end on the simulated site (scan → map → mesh → calibrate → wall pose → pre-warp →
         photograph) and write report.html with pictures and the accuracy against the truth."""
-        from arproj.console import err_console
+        from arproj.console import Interrupted
         from arproj.demo import DemoOptions, print_summary, run_demo
 
         try:
             ctx = run_demo(DemoOptions(out=out, wall=wall, resume=resume, quick=quick, seed=seed,
                                        rig=rig))
         except KeyboardInterrupt:
-            err_console.print(f"\n[bold red]arproj demo: interrupted.[/] The finished stages are saved in {out}; "
-                              f"run `arproj demo --out {out} --resume` to go on from there.", highlight=False)
-            raise typer.Exit(130) from None
+            raise Interrupted(f"the finished stages are saved in {out}; run `arproj demo --out {out} --resume` "
+                              "to go on from there") from None
         print_summary(ctx)
         if any(r.status in ("failed", "not run") for r in ctx.stages.values()):
             raise typer.Exit(1)

@@ -8,6 +8,8 @@ import typer
 
 from arproj.console import console, err_console, progress_bar
 
+RANGE_IMAGES_FILE = "range_images.npz"  # the demo keeps the range images it meshed in the map folder
+
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     @app.command("map")
@@ -28,12 +30,27 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     ) -> None:
         """Build the in-wall map from a scan log: occupancy grids, stitched frames, classified objects, and
         the exports the projection session and CAD read."""
+        from arproj.outputs import OutputFolder
         from geometry.errors import InputError
         from mapping import exports
         from mapping.pipeline import MapSettings, build_map, load_scan
 
         if not resolution_mm > 0:
             raise InputError(f"--resolution {resolution_mm}: the cell size must be a positive number of mm")
+        # every input is read and checked before anything is written: a refusal leaves an earlier map as it was
+        folder = OutputFolder(out, exports.file_names() | {RANGE_IMAGES_FILE}, "map folder",
+                              keep={RANGE_IMAGES_FILE})
+        folder.check()
+        truth = None
+        if wall is not None:
+            from scanner.wall import load_wall
+
+            truth = load_wall(wall)
+        surface = None  # (range views, T_world_from_wall)
+        if range_images is not None:
+            from mapping.surface import load_range_images
+
+            surface = load_range_images(str(range_images))
         with progress_bar() as bar:
             task = bar.add_task("mapping", total=8)
             bar.update(task, description="reading the log")
@@ -42,21 +59,20 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             bar.update(task, description=f"mapping {data.n_samples:,} samples")
             result = build_map(data, MapSettings(resolution_m=resolution_mm / 1000.0, stitch=not no_stitch))
             bar.advance(task)
-            out.mkdir(parents=True, exist_ok=True)
             mesh = None
-            if range_images is not None:
-                from mapping.surface import load_range_images, wall_mesh_from_range_images
+            if surface is not None:
+                from mapping.surface import wall_mesh_from_range_images
 
                 bar.update(task, description="meshing the range images")
-                views, T_world_from_wall = load_range_images(str(range_images))
-                mesh = wall_mesh_from_range_images(views, result.bounds, T_world_from_wall)
-            steps = exports.export_steps(data, result, out, mesh, title=f"In-wall map of {log.name}",
-                                        signal_y=signal_y)
+                mesh = wall_mesh_from_range_images(surface[0], result.bounds, surface[1])
             written = []
-            for name, step in steps:
-                bar.update(task, description=f"writing {name}")
-                written.append(step())
-                bar.advance(task)
+            with folder as tmp:  # the whole folder, then swapped in place: a kill leaves the old or the new map
+                steps = exports.export_steps(data, result, tmp, mesh, title=f"In-wall map of {log.name}",
+                                            signal_y=signal_y)
+                for name, step in steps:
+                    bar.update(task, description=f"writing {name}")
+                    written.append(out / step().name)
+                    bar.advance(task)
         for note in result.notes:
             console.print(note, highlight=False)
         for w in result.warnings:
@@ -68,11 +84,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         console.print(f"found {summary}", highlight=False)
         for path in written:
             console.print(f"wrote {path}", highlight=False)
-        if wall is not None:
+        if truth is not None:
             from mapping.evaluate import evaluate
-            from scanner.wall import load_wall
 
-            ev = evaluate(result.objects, load_wall(wall))
+            ev = evaluate(result.objects, truth)
             mean, p95 = ev.position_mm()
             console.print(f"against {wall}: recall {ev.recall:.1%} ({ev.n_found}/{ev.n_targets}), precision "
                           f"{ev.precision:.1%}, position error mean {mean:.2f} mm, p95 {p95:.2f} mm, "

@@ -11,7 +11,10 @@ import typer
 from geometry.errors import InputError
 
 if TYPE_CHECKING:
+    from arproj.run.scan import DeviceUrls, ScanSettings
+    from scanner.log import ScanLog
     from scanner.plan import FrameTarget
+    from scanner.wall import Wall
 
 
 def _fmt_duration(seconds: float) -> str:
@@ -31,6 +34,50 @@ def _ask_operator(frame: FrameTarget) -> None:
     except EOFError:
         raise InputError(f"frame {frame.frame_id}: nobody at the terminal to place the robot (input closed)",
                          "run the scan at a terminal, or give the robot base's URL with --base") from None
+
+
+def _scan_into(scan_log: ScanLog, the_wall: Wall, settings: ScanSettings, fast: bool, faults: float,
+               urls: DeviceUrls | None, virtual_clock: bool, device_timeout: float) -> None:
+    """Scan into an open log (the simulated site, or the devices at urls) and print what was done."""
+    from arproj.console import console, progress_bar
+    from arproj.run.scan import scan_on_devices, scan_simulated
+
+    settings.serial, settings.faults = not fast, faults
+    if urls is not None and urls.base is None:  # an operator at the terminal: no progress bar over the prompts
+        scan = scan_on_devices(the_wall, settings, urls, scan_log, operator=_ask_operator,
+                               realtime=not virtual_clock, timeout_s=device_timeout)
+    else:
+        with progress_bar() as bar:
+            task = bar.add_task("scanning", total=1.0)
+
+            def progress(t: float, total: float, passes: int) -> None:
+                bar.update(task, completed=t, total=total,
+                           description=f"scan {_fmt_duration(t)}/~{_fmt_duration(total)}")
+
+            scan = scan_simulated(the_wall, settings, scan_log, progress) if urls is None else \
+                scan_on_devices(the_wall, settings, urls, scan_log, progress, realtime=not virtual_clock,
+                                timeout_s=device_timeout)
+    result = scan.result
+    if urls is not None:
+        console.print(f"device faults recovered: {scan.faults_recovered}")
+    elif settings.serial and faults > 0:
+        console.print(f"device faults injected: {scan.faults_injected}, recovered: {scan.faults_recovered}")
+    n = len(result.samples.get("time_s", []))
+    console.print(f"{scan_log.path}: {result.n_frames} frames, {result.n_passes} passes "
+                  f"({result.measured_passes} measured now), {n} samples; {'' if urls else 'simulated '}scan "
+                  f"time {_fmt_duration(result.scan_time_s)} ({settings.plan})")
+    if result.plan_report or result.plan_priors:
+        from scanner.plan import PRIORS_RULE, STOPPING_RULE
+
+        console.print(f"stopping rule: {STOPPING_RULE}")
+        console.print(f"priors: {PRIORS_RULE}")
+        for line in result.plan_priors:  # which zones and sockets ordered the passes
+            console.print(f"  {line}")
+        for row in result.plan_report:
+            first = f"; traced first: found in {row['first_in']}" if row.get("first_in") else ""
+            console.print(f"  frame {row['frame_id']} object {row['object']} ({row['channel']}): "
+                          f"{row['length_m']:.2f} m traced, {100 * row['measured_share']:.0f} % measured "
+                          f"by following passes; ends: {', '.join(row['ends'])}{first}")
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
@@ -77,15 +124,13 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing log at --log."),
     ) -> None:
         """Scan a wall: frames, passes and every sample go to a SQLite log, batch by batch (kill -9 safe)."""
-        from arproj.console import console, progress_bar
-        from arproj.run.scan import (
-            DeviceUrls,
-            ScanSettings,
-            new_scan_log,
-            resolve_wall,
-            scan_on_devices,
-            scan_simulated,
-        )
+        from scanner.log import WriterLock
+
+        for path in (resume, log):  # a log another scan is writing: refused before the slow set-up below
+            if path is not None:
+                WriterLock(path).probe()
+        from arproj.console import console
+        from arproj.run.scan import DeviceUrls, ScanSettings, new_scan_log, resolve_wall
         from scanner.run import open_for_resume
 
         if not 0.0 <= faults <= 0.5:
@@ -107,10 +152,18 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             if log is not None:
                 raise InputError("give either --resume LOG or --log LOG, not both")
             scan_log, the_wall = open_for_resume(resume, wall)
-            settings = ScanSettings.from_log(scan_log.meta, resume, on_devices=urls is not None)
+            try:
+                settings = ScanSettings.from_log(scan_log.meta, resume, on_devices=urls is not None)
+            except BaseException:
+                scan_log.close()
+                raise
+            done = scan_log.pass_count()
             if scan_log.meta.get("status") == "complete":
-                console.print(f"{resume}: scan already complete ({scan_log.pass_count()} passes)")
+                console.print(f"{resume}: scan already complete ({done} passes)")
+                scan_log.close()
                 return
+            console.print(f"{resume}: resuming after {done} recorded passes" if done else
+                          f"{resume}: no pass recorded yet; the scan starts from its first pass", highlight=False)
         else:
             if wall is None or log is None:
                 raise InputError("arproj scan needs --wall FILE and --log LOG (or --resume LOG)")
@@ -127,44 +180,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                  "fasteners too")
             settings = ScanSettings(plan=plan, plan_options={"priors": priors, "coarse_row_spacing_m": row_spacing}
                                     if plan == "adaptive" else None, seed=seed)
+            replacing = overwrite and log.exists()
             scan_log = new_scan_log(log, the_wall, str(wall), settings, overwrite=overwrite, simulated=urls is None)
-        settings.serial, settings.faults = not fast, faults
-        if urls is not None and base is None:  # an operator at the terminal: no progress bar over the prompts
-            scan = scan_on_devices(the_wall, settings, urls, scan_log, operator=_ask_operator,
-                                   realtime=not virtual_clock, timeout_s=device_timeout)
-        else:
-            with progress_bar() as bar:
-                task = bar.add_task("scanning", total=1.0)
-
-                def progress(t: float, total: float, passes: int) -> None:
-                    bar.update(task, completed=t, total=total,
-                               description=f"scan {_fmt_duration(t)}/~{_fmt_duration(total)}")
-
-                scan = scan_simulated(the_wall, settings, scan_log, progress) if urls is None else \
-                    scan_on_devices(the_wall, settings, urls, scan_log, progress, realtime=not virtual_clock,
-                                    timeout_s=device_timeout)
-        result = scan.result
-        if urls is not None:
-            console.print(f"device faults recovered: {scan.faults_recovered}")
-        elif settings.serial and faults > 0:
-            console.print(f"device faults injected: {scan.faults_injected}, recovered: {scan.faults_recovered}")
-        n = len(result.samples.get("time_s", []))
-        console.print(f"{scan_log.path}: {result.n_frames} frames, {result.n_passes} passes "
-                      f"({result.measured_passes} measured now), {n} samples; {'' if urls else 'simulated '}scan "
-                      f"time {_fmt_duration(result.scan_time_s)} ({settings.plan})")
-        if result.plan_report or result.plan_priors:
-            from scanner.plan import PRIORS_RULE, STOPPING_RULE
-
-            console.print(f"stopping rule: {STOPPING_RULE}")
-            console.print(f"priors: {PRIORS_RULE}")
-            for line in result.plan_priors:  # which zones and sockets ordered the passes
-                console.print(f"  {line}")
-            for row in result.plan_report:
-                first = f"; traced first: found in {row['first_in']}" if row.get("first_in") else ""
-                console.print(f"  frame {row['frame_id']} object {row['object']} ({row['channel']}): "
-                              f"{row['length_m']:.2f} m traced, {100 * row['measured_share']:.0f} % measured "
-                              f"by following passes; ends: {', '.join(row['ends'])}{first}")
-        scan_log.close()
+            console.print(f"{log}: {'replaced by a new' if replacing else 'new'} scan log", highlight=False)
+        with scan_log:
+            _scan_into(scan_log, the_wall, settings, fast, faults, urls, virtual_clock, device_timeout)
 
     @app.command("scan-plot")
     def scan_plot(

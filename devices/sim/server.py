@@ -1,8 +1,11 @@
 """The one simulator server: a simulated device served as a `socket://127.0.0.1:PORT` serial URL.
 
-A TCP server thread on loopback, one connection at a time, that frames what arrives with the device's framer,
-hands each frame to the device and sends its answers, every frame through the fault injector
-(devices/sim/faults.py). The host code opens the URL as it would a real port, so simulation and hardware share
+A TCP server thread on loopback that frames what arrives with the device's framer, hands each frame to the
+device and sends its answers, every frame through the fault injector (devices/sim/faults.py). It serves one
+controlling host at a time: another program that connects meanwhile gets one `BUSY …` line saying so and is
+hung up on (devices.link turns that into a DeviceError naming it), so nothing else can move a simulated device
+under the session that drives it. Its framer bounds what it buffers (a "line" without a newline is dropped
+past MAX_LINE_BYTES). The host code opens the URL as it would a real port, so simulation and hardware share
 one code path. A device is a `SimDevice`: its framer, a greeting on connect, a reset on (re)connect, and one
 list of answers per frame.
 """
@@ -10,6 +13,7 @@ list of answers per frame.
 from __future__ import annotations
 
 import contextlib
+import select
 import socket
 import threading
 import time
@@ -17,7 +21,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Any
 
-from devices.link import Framer
+from devices.link import BUSY_PREFIX, Framer
 from devices.sim.faults import FaultConfig, FaultInjector
 
 
@@ -47,7 +51,7 @@ class SimDevice(ABC):
 
 
 class DeviceServer(threading.Thread):
-    """A TCP server on 127.0.0.1 for one simulated device, one connection at a time."""
+    """A TCP server on 127.0.0.1 for one simulated device and one controlling host at a time."""
 
     def __init__(self, device: SimDevice, faults: FaultConfig | None = None, stream: int = 0) -> None:
         super().__init__(daemon=True, name=f"sim-{device.name}")
@@ -59,6 +63,7 @@ class DeviceServer(threading.Thread):
         self.stopping = threading.Event()
         self.down_until = 0.0
         self.connections = 0
+        self.refused = 0  # connections turned away while a host was connected
         self._conn: socket.socket | None = None
 
     @property
@@ -105,6 +110,33 @@ class DeviceServer(threading.Thread):
                 finally:
                     self._conn = None
 
+    def _refuse_others(self, conn: socket.socket) -> bool:
+        """Turn away whoever connects while the host on conn is connected, saying why. False if that host has
+        hung up meanwhile (then a new connection is its reconnect, for run() to accept)."""
+        while select.select([self.listener], [], [], 0)[0]:
+            timeout = conn.gettimeout()
+            conn.setblocking(False)  # a peek that must not wait (with a timeout set, recv would wait first)
+            try:
+                if conn.recv(1, socket.MSG_PEEK) == b"":
+                    return False
+            except BlockingIOError:
+                pass  # connected, nothing to read
+            except OSError:
+                return False
+            finally:
+                conn.settimeout(timeout)
+            try:
+                other, address = self.listener.accept()
+            except OSError:
+                return True  # the one who knocked is gone already
+            self.refused += 1
+            with other, contextlib.suppress(OSError):
+                other.sendall(BUSY_PREFIX + f"simulated {self.device.name} on port {self.port} already has a "
+                              f"controlling host; one program drives it at a time (refused {address[0]}:"
+                              f"{address[1]})\n".encode())
+                other.shutdown(socket.SHUT_RDWR)
+        return True
+
     def _serve(self, conn: socket.socket) -> None:
         conn.settimeout(0.05)
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -113,6 +145,8 @@ class DeviceServer(threading.Thread):
         if greeting:
             conn.sendall(b"".join(framer.encode(frame) + framer.terminator for frame in greeting))
         while not self.stopping.is_set():
+            if not self._refuse_others(conn):
+                return
             try:
                 chunk = conn.recv(65536)
             except TimeoutError:

@@ -21,7 +21,7 @@ from mapping.exports.common import ExportJob, scanned_regions
 from mapping.pipeline import MapResult
 from mapping.scandata import ScanData
 
-__all__ = ["ExportJob", "export_all", "export_steps", "formats", "scanned_regions"]
+__all__ = ["ExportJob", "export_all", "export_steps", "file_names", "formats", "scanned_regions"]
 
 _NOT_FORMATS = {"common"}
 
@@ -31,6 +31,11 @@ def formats() -> list[ModuleType]:
     found = [importlib.import_module(f"{__name__}.{m.name}") for m in pkgutil.iter_modules(__path__)
              if m.name not in _NOT_FORMATS]
     return sorted(found, key=lambda m: (m.ORDER, m.__name__))
+
+
+def file_names() -> set[str]:
+    """The names of every file the exports write into a map folder."""
+    return {m.FILE_NAME for m in formats()}
 
 
 def export_steps(data: ScanData, result: MapResult, out_dir: str | Path, mesh: trimesh.Trimesh | None = None,

@@ -127,3 +127,26 @@ def test_real_images_held_out_beat_the_two_stage_opencv_pipeline(shared_data) ->
     # 0.01 px (~2 %): the README's figures are 3 decimals from another OpenCV build; far below the gaps above.
     assert abs(figures.training_rms_px["opencv stereo_calib"] - 0.605) < 0.01
     assert abs(figures.training_rms_px["opencv two-stage"] - 0.447) < 0.01
+
+
+def test_the_quality_gate_passes_sound_figures_and_names_each_bad_one() -> None:
+    """Limits from the problem: residuals up to max(1 px, diagonal / 1000), a baseline up to twice the board's
+    median distance (issue 24 item 6)."""
+    from calibration.stereo import StereoCalibration, residual_limit_px, stereo_quality_problems
+
+    assert residual_limit_px((640, 480)) == 1.0 and residual_limit_px((4000, 3000)) == pytest.approx(5.0)
+    cam = Intrinsics(fx=500.0, fy=500.0, cx=320.0, cy=240.0, width=640, height=480)
+    boards = [make_pose(np.eye(3), np.array([0.0, 0.0, z])) for z in (0.4, 0.5, 0.6)]
+
+    def calib(rms: float, epipolar: float, baseline_m: float) -> StereoCalibration:
+        return StereoCalibration(cam, cam, make_pose(np.eye(3), np.array([-baseline_m, 0.0, 0.0])), rms, epipolar,
+                                 [], [], boards)
+
+    assert stereo_quality_problems(calib(0.2, 0.11, 0.083)) == []  # OpenCV's sample pairs, as calibrated
+    problems = stereo_quality_problems(calib(20.6, 1170.0, 6.4))  # the wrong board of the issue
+    assert len(problems) == 3 and problems[0].startswith("reprojection RMS 20.60 px")
+    assert problems[1].startswith("epipolar error 1170.00 px") and problems[2].startswith("baseline 6.400 m")
+    assert stereo_quality_problems(calib(float("nan"), 0.1, 0.08))[0].startswith("reprojection RMS nan")
+    assert stereo_quality_problems(calib(0.3, 0.2, 1.1)) == ["baseline 1.100 m, implausible with the board 0.50 m "
+                                                             "away (at most 2x that, or one camera could not see "
+                                                             "it)"]
