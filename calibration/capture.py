@@ -129,7 +129,7 @@ class LiveCamera:
                     self._failed = True
                     self._cond.notify_all()
                     return
-                grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+                grey = np.asarray(image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
                 self._frames = [*self._frames, (time.monotonic(), grey)][-2:]
                 self._cond.notify_all()
 
@@ -143,7 +143,7 @@ class LiveCamera:
                     raise InputError(f"{self.name}: the camera stopped delivering pictures",
                                      "check its cable or stream URL")
                 fresh = [f for t, f in self._frames if t >= after]
-                if len(fresh) == 2 and frames_agree(*fresh):
+                if len(fresh) == 2 and frames_agree(fresh[0], fresh[1]):
                     return fresh[0]
                 left = deadline - time.monotonic()
                 if left <= 0:

@@ -212,8 +212,10 @@ def _print_live(summary: dict) -> None:
     if "mount" in summary:
         m = summary["mount"]
         console.print(f"  mount from the laser ({m['views']} panel poses, laser RMS {m['laser_rms_mm']:.1f} mm): "
-                      f"± {m['mount_95']['rotation_deg']:.3f}°, ± {m['mount_95']['position_mm']:.2f} mm (95 %)",
-                      highlight=False)
+                      f"± {m['mount_95']['rotation_deg']:.3f}°, ± {m['mount_95']['position_mm']:.2f} mm (95 %)"
+                      + ("" if m["adopted"] else "; less certain than the design value "
+                         f"(± {m['design_tolerance_95']['rotation_deg']}°, ± {m['design_tolerance_95']['position_mm']} "
+                         "mm): the rig keeps the design value"), highlight=False)
     if "head" in summary:
         h = summary["head"]
         console.print(f"  head model residual {h['rotation_rms_deg']:.4f}° / {h['position_rms_mm']:.3f} mm from "

@@ -47,6 +47,8 @@ from geometry.rig import Rig
 PAN_TILT_PLAN_DEG = (15.0, 10.0)  # pan and tilt excursions about the aim: the projected image stays in view
 WALL_POINT_STEP_PX = 16  # projector-pixel grid of triangulated wall points per head pose
 ROLL = 2  # the joint a Pelco-D pan/tilt head does not have
+# A mount is drawn and built to about this (95 %): a calibrated mount less certain than that is not adopted.
+MOUNT_DESIGN_TOLERANCE = {"rotation_deg": 1.0, "position_mm": 10.0}
 
 
 def pan_tilt_plan(aim_deg: NDArray[np.float64], n_fit: int | None = None
@@ -158,11 +160,15 @@ def step_mount(station: LiveStation, rig: Rig, out: Path, board: Board, n_poses:
         views.append(board_plane_view(view, camera))
         scans.append(scan)
     fit = calibrate_mount(views, scans, T_robot_from_camera_left_design)
-    rig.poses["T_robot_from_camera_left"] = fit.T_robot_from_camera_left
-    rig.quality["mount"] = {k: v for k, v in fit.quality().items() if k != "covariance"} | {
-        "method": "laser and board (Zhang & Pless)", "poses_without_board": missed}
+    bounds = fit.bounds_95()
+    adopted = all(bounds[k] <= MOUNT_DESIGN_TOLERANCE[k] for k in bounds)
+    if adopted:
+        rig.poses["T_robot_from_camera_left"] = fit.T_robot_from_camera_left
+    note = {"adopted": adopted, "design_tolerance_95": MOUNT_DESIGN_TOLERANCE, "poses_without_board": missed}
+    rig.quality["mount"] = {k: v for k, v in fit.quality().items() if k != "covariance"} | note | {
+        "method": "laser and board (Zhang & Pless)"}
     rig.save(out)
-    return {"quality": fit.quality() | {"poses_without_board": missed}}, fit
+    return {"quality": fit.quality() | note}, fit
 
 
 # -- against the simulated site's truth ------------------------------------------------------------------------
