@@ -5,11 +5,14 @@ cameras (camera 1 = right camera or projector); one pose T_0_from_view per view 
 by both cameras' observations of that view. Residuals: reprojection errors in pixels.
 The Jacobian is taken by finite differences over column groups (scipy's sparse scheme: one residual call per
 group, not per unknown), then solved densely with the exact trust-region solver.
+
+Uncertainty: the covariance of the unknowns at the solution is s²·(JᵀJ)⁻¹ with s² the residual variance
+(sum of squares over residuals minus unknowns); each free camera's fx, fy, cx, cy get their σ from it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +43,7 @@ class BundleResult:
     T_1_from_0: NDArray[np.float64] | None
     T_0_from_view: list[NDArray[np.float64]]
     residuals: list[NDArray[np.float64]]  # per observation, (n, 2) px, in the order given
+    intrinsics_sigma: list[dict[str, float] | None] = field(default_factory=list)  # per camera (None: fixed)
 
     @property
     def rms_px(self) -> float:
@@ -157,4 +161,21 @@ def bundle_adjust(cameras: list[Intrinsics], models: list[str], observations: li
         bounds = np.cumsum([0, *[len(observations[k].object_points) for k in idx]])
         for k, a, b in zip(idx, bounds[:-1], bounds[1:], strict=True):
             residuals[k] = r[a:b]
-    return BundleResult(out_cams, T10, poses, [residuals[k] for k in range(len(observations))])
+    return BundleResult(out_cams, T10, poses, [residuals[k] for k in range(len(observations))],
+                        _intrinsics_sigma(problem, fit.fun, jacobian(x)))
+
+
+def _intrinsics_sigma(problem: _Problem, r: NDArray[np.float64], J: NDArray[np.float64]
+                      ) -> list[dict[str, float] | None]:
+    """σ of each free camera's fx, fy, cx, cy from s²·(JᵀJ)⁻¹ at the solution."""
+    dof = max(len(r) - J.shape[1], 1)
+    cov = float(r @ r) / dof * np.linalg.pinv(J.T @ J)
+    out: list[dict[str, float] | None] = []
+    for cam in range(len(problem.cameras)):
+        if problem.fixed[cam]:
+            out.append(None)
+            continue
+        o = problem.offsets[cam]
+        sd = np.sqrt(np.diag(cov)[o:o + 4])
+        out.append({k: float(v) for k, v in zip(("fx", "fy", "cx", "cy"), sd, strict=True)})
+    return out

@@ -1,13 +1,21 @@
-"""Capture stereo calibration pairs from live cameras (cv2.VideoCapture: an index, a video file or a URL).
+"""Live cameras (cv2.VideoCapture: an index, a video file or a URL): stereo calibration pairs, and settled
+frames for projected patterns.
 
 Frames are read from both cameras in step; a pair is kept when the board is found in both images and the
 view is new: the board's centre has moved, or its apparent size or shape (tilt) has changed, by at least
 `min_change` of the image compared with every pair kept so far. Kept pairs are written as
 left_NN.png / right_NN.png, ready for `arproj calibrate stereo`.
+
+A pattern shown on a beamer is photographed by `LiveCamera.settled_frame`: a thread reads the camera all the
+time (so no driver or network buffer fills with frames taken before the pattern was shown), and a frame counts
+once it arrived after the pattern was shown plus a settle time and the next frame agrees with it within the
+sensor's noise (the beamer has switched and the exposure holds the new image only), bounded by a timeout.
 """
 
 from __future__ import annotations
 
+import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +28,9 @@ from calibration.boards import Board, BoardView, detect
 from geometry.errors import InputError
 
 MIN_VIEW_CHANGE = 0.08  # fraction of the image diagonal the board must move (or its outline change) to count
+STABLE_LEVEL = 24  # grey levels: a pixel differing by more than this between two frames has changed ...
+STABLE_FRACTION = 0.002  # ... and two frames agree when at most this share of pixels has
+SETTLE_TIMEOUT_S = 10.0
 
 
 @dataclass
@@ -31,8 +42,13 @@ class CaptureResult:
 
 
 def open_source(source: str, name: str) -> cv2.VideoCapture:
-    """A camera by index ("0"), a video file or a stream URL; InputError when it does not open."""
-    cap = cv2.VideoCapture(int(source) if source.isdigit() else source)
+    """A camera by index ("0"), a video file or a stream URL (through FFmpeg); InputError when it does not open."""
+    if source.isdigit():
+        cap = cv2.VideoCapture(int(source))
+    elif "://" in source:
+        cap = cv2.VideoCapture(source, cv2.CAP_FFMPEG)  # e.g. an MJPEG stream over HTTP
+    else:
+        cap = cv2.VideoCapture(source)
     if not cap.isOpened():
         raise InputError(f"{name} camera {source!r} does not open",
                          "check the index, file or URL and that no other program holds the camera")
@@ -78,3 +94,71 @@ def capture_pairs(left: cv2.VideoCapture, right: cv2.VideoCapture, board: Board,
         if on_frame is not None:
             on_frame(result.frames_read, len(result.left_files))
     return result
+
+
+def frames_agree(a: NDArray[np.uint8], b: NDArray[np.uint8], level: int = STABLE_LEVEL,
+                 fraction: float = STABLE_FRACTION) -> bool:
+    """Whether two frames of one camera show the same scene: at most `fraction` of the pixels differ by more
+    than `level` grey levels (sensor noise and compression stay well below)."""
+    if a.shape != b.shape:
+        return False
+    changed = cv2.absdiff(a, b) > level
+    return float(np.count_nonzero(changed)) <= fraction * changed.size
+
+
+class LiveCamera:
+    """A camera read continuously by a thread; frames are grey (h, w) uint8 with the time they arrived.
+
+    Use as a context manager or call close(); the capture is released then.
+    """
+
+    def __init__(self, cap: cv2.VideoCapture, name: str) -> None:
+        self.cap, self.name = cap, name
+        self._cond = threading.Condition()
+        self._frames: list[tuple[float, NDArray[np.uint8]]] = []  # the last two: (arrival time, frame)
+        self._failed = False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, daemon=True, name=f"camera-{name}")
+        self._thread.start()
+
+    def _read(self) -> None:
+        while not self._stop.is_set():
+            ok, image = self.cap.read()
+            with self._cond:
+                if not ok or image is None:
+                    self._failed = True
+                    self._cond.notify_all()
+                    return
+                grey = np.asarray(image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), np.uint8)
+                self._frames = [*self._frames, (time.monotonic(), grey)][-2:]
+                self._cond.notify_all()
+
+    def settled_frame(self, after: float, timeout_s: float = SETTLE_TIMEOUT_S) -> NDArray[np.uint8]:
+        """The first frame that arrived at or after `after` (time.monotonic()) and that the next frame agrees
+        with; InputError when none settles within timeout_s or the camera stops delivering."""
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while True:
+                if self._failed:
+                    raise InputError(f"{self.name}: the camera stopped delivering pictures",
+                                     "check its cable or stream URL")
+                fresh = [f for t, f in self._frames if t >= after]
+                if len(fresh) == 2 and frames_agree(fresh[0], fresh[1]):
+                    return fresh[0]
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise InputError(f"{self.name}: no two frames agreed within {timeout_s:.0f} s of the pattern "
+                                     "being shown", "keep the scene still, check the camera's auto exposure is "
+                                     "off, or raise --settle-timeout")
+                self._cond.wait(timeout=left)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self.cap.release()
+
+    def __enter__(self) -> LiveCamera:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -9,16 +9,26 @@ side (the plan does) so backlash is constant too.
 
 Residuals per measured pose: rotation error (radians, scaled by ROTATION_WEIGHT_M metres per radian so one
 degree weighs like 17 mm) and position error (metres).
+
+A head whose roll (or any) joint never turns — a Pelco-D pan/tilt head has no roll axis — is fitted with that
+joint given in `fixed_joints`: at a constant angle its axis and line are unobservable and its rotation is
+absorbed in the zero pose, so they are not unknowns (the model keeps the nominal or initial ones).
+
+Uncertainty: the unknowns' covariance is the least-squares sandwich (JᵀJ)⁻¹ Jᵀ Σ J (JᵀJ)⁻¹ at the solution,
+Σ diagonal with the rotation and the position residuals' own variances (each from its residuals, corrected
+for the unknowns' share of the degrees of freedom); `HeadFit.pose_covariance(angles)` carries it to the
+projector's predicted pose (rotation vector, position) at any angles.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
+from scipy.optimize._numdiff import approx_derivative
 
 from geometry.errors import InputError
 from geometry.head import HeadModel
@@ -45,6 +55,25 @@ class HeadFit:
     position_rms_m: float
     per_pose_rotation_deg: list[float]
     per_pose_position_m: list[float]
+    covariance: NDArray[np.float64] | None = None  # of the unknowns x (see fit_head)
+    model_from: Callable[[NDArray[np.float64]], HeadModel] | None = None
+    x: NDArray[np.float64] | None = None
+
+    def pose_covariance(self, angles_deg: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(3x3 covariance of the predicted projector orientation as a rotation vector, rad²; 3x3 of its
+        position, m²) at these commanded angles, in the fit's base frame."""
+        if self.covariance is None or self.model_from is None or self.x is None:
+            raise ValueError("this head fit has no covariance")
+        model_from, x = self.model_from, self.x
+        T0 = self.model.T_robot_from_projector(angles_deg)
+
+        def pose_vector(v: NDArray[np.float64]) -> NDArray[np.float64]:
+            T = model_from(v).T_robot_from_projector(angles_deg)
+            return np.concatenate([rotation_vector(T[:3, :3] @ T0[:3, :3].T), T[:3, 3]])
+
+        G = approx_derivative(pose_vector, x, method="3-point")
+        C = G @ self.covariance @ G.T
+        return C[:3, :3], C[3:, 3:]
 
     def quality(self) -> dict:
         return {"rotation_rms_deg": round(self.rotation_rms_deg, 5),
@@ -124,10 +153,11 @@ def _initial_model(angles: list[NDArray[np.float64]], poses: list[NDArray[np.flo
 
 
 def fit_head(angles_deg: list[ArrayLike], T_base_from_projector: list[NDArray[np.float64]],
-             nominal: HeadModel | None = None) -> HeadFit:
+             nominal: HeadModel | None = None, fixed_joints: Sequence[int] = ()) -> HeadFit:
     """Fit the head model (in the poses' base frame, e.g. robot or camera_left) to measured projector poses.
 
-    angles_deg: commanded (pan, tilt, roll) per pose; T_base_from_projector: the measured poses (4x4).
+    angles_deg: commanded (pan, tilt, roll) per pose; T_base_from_projector: the measured poses (4x4);
+    fixed_joints: joints (0 pan, 1 tilt, 2 roll) held at one angle throughout, whose axes are not fitted.
     """
     angles = [np.asarray(a, dtype=np.float64).reshape(3) for a in angles_deg]
     poses = [np.asarray(T, dtype=np.float64) for T in T_base_from_projector]
@@ -137,24 +167,30 @@ def fit_head(angles_deg: list[ArrayLike], T_base_from_projector: list[NDArray[np
         raise InputError(f"head calibration: {len(poses)} poses measured; at least {MIN_HEAD_POSES} are needed",
                          "measure the projector at more head angles (each joint alone and combined)")
     span = np.ptp(np.array(angles), axis=0)
+    fixed = sorted(set(int(j) for j in fixed_joints))
+    for j in fixed:
+        if span[j] > 0:
+            raise InputError(f"head calibration: joint {j} is to be held fixed but moved by {span[j]:.2f}°")
     for j, name in enumerate(("pan", "tilt", "roll")):
-        if span[j] < MIN_JOINT_SPAN_DEG:
+        if j not in fixed and span[j] < MIN_JOINT_SPAN_DEG:
             raise InputError(f"head calibration: the {name} joint moved only {span[j]:.1f}° across the poses",
                              f"move it by at least {MIN_JOINT_SPAN_DEG:.0f}° (both directions) while measuring")
     init = _initial_model(angles, poses, nominal)
     bases = [_perp_basis(a) for a in init.axes]
+    moving = [j for j in range(3) if j not in fixed]
+    n_joint = 4 * len(moving)
 
     def model_from(x: NDArray[np.float64]) -> HeadModel:
-        axes = np.empty((3, 3))
-        points = np.empty((3, 3))
-        for j in range(3):
+        axes = init.axes.copy()
+        points = init.points.copy()
+        for k, j in enumerate(moving):
             e1, e2 = bases[j]
-            a = init.axes[j] + x[4 * j] * e1 + x[4 * j + 1] * e2
+            a = init.axes[j] + x[4 * k] * e1 + x[4 * k + 1] * e2
             axes[j] = a / np.linalg.norm(a)
-            points[j] = init.points[j] + x[4 * j + 2] * e1 + x[4 * j + 3] * e2
-        dR = rotation_matrix(x[12:15])
+            points[j] = init.points[j] + x[4 * k + 2] * e1 + x[4 * k + 3] * e2
+        dR = rotation_matrix(x[n_joint:n_joint + 3])
         T0 = init.T_robot_from_projector_zero
-        T_zero = make_pose(dR @ T0[:3, :3], T0[:3, 3] + x[15:18])
+        T_zero = make_pose(dR @ T0[:3, :3], T0[:3, 3] + x[n_joint + 3:n_joint + 6])
         return HeadModel(axes, points, T_zero)
 
     def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -164,12 +200,26 @@ def fit_head(angles_deg: list[ArrayLike], T_base_from_projector: list[NDArray[np
         rotation = ROTATION_WEIGHT_M * rotation_vectors(np.transpose(P[:, :3, :3], (0, 2, 1)) @ T[:, :3, :3])
         return np.column_stack([rotation, P[:, :3, 3] - T[:, :3, 3]]).ravel()  # per pose: rotation, position
 
-    sol = least_squares(residuals, np.zeros(18), method="lm", xtol=FIT_TOLERANCE, ftol=FIT_TOLERANCE,
+    sol = least_squares(residuals, np.zeros(n_joint + 6), method="lm", xtol=FIT_TOLERANCE, ftol=FIT_TOLERANCE,
                         gtol=FIT_TOLERANCE, max_nfev=5000)
     model = model_from(sol.x)
     rot, pos = head_errors(model, angles, poses)
     return HeadFit(model, float(np.sqrt(np.mean(np.square(rot)))), float(np.sqrt(np.mean(np.square(pos)))),
-                   rot, pos)
+                   rot, pos, _sandwich_covariance(sol.fun, sol.jac), model_from, sol.x.copy())
+
+
+def _sandwich_covariance(r: NDArray[np.float64], J: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Covariance of the unweighted fit's unknowns with rotation and position residuals of their own variance.
+
+    Residuals come per pose as (rotation 3, position 3); each group's variance is its sum of squares over its
+    share of the degrees of freedom."""
+    m, n = J.shape
+    rows = np.arange(m) % 6 < 3
+    dof_share = max(m - n, 1) / m
+    var = np.where(rows, np.sum(r[rows] ** 2) / (rows.sum() * dof_share),
+                   np.sum(r[~rows] ** 2) / ((~rows).sum() * dof_share))
+    A = np.linalg.pinv(J.T @ J)
+    return A @ (J.T * var) @ J @ A
 
 
 def head_errors(model: HeadModel, angles_deg: Sequence[ArrayLike], T_base_from_projector: list[NDArray[np.float64]]

@@ -270,6 +270,7 @@ class ProjectorCalibration:
     per_pose_rms_px: list[float] = field(default_factory=list)
     sources: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    projector_sigma: dict[str, float] | None = None  # σ of fx, fy, cx, cy (px) from the fit's covariance
 
     def quality(self) -> dict:
         return {
@@ -284,6 +285,9 @@ class ProjectorCalibration:
             "T_projector_from_camera": (None if self.T_projector_from_camera is None
                                         else np.asarray(self.T_projector_from_camera).tolist()),
             "warnings": list(self.warnings),
+            # 95 % bounds (1.96 σ, px) of the projector's fx, fy, cx, cy from the fit's covariance
+            "projector_95": (None if self.projector_sigma is None
+                             else {k: round(1.96 * v, 4) for k, v in self.projector_sigma.items()}),
         }
 
 
@@ -364,7 +368,7 @@ def calibrate_inverse_camera(points_3d: list[NDArray[np.float64]], projector_pix
     T_proj_from_ref = [T @ invert(F) for T, F in zip(fit.T_0_from_view, frames, strict=True)]
     per_pose = [float(np.sqrt(np.mean(np.sum(r ** 2, axis=1)))) for r in fit.residuals]
     return ProjectorCalibration(fit.cameras[0], fit.rms_px, T_proj_from_ref, per_pose_rms_px=per_pose,
-                                sources=list(sources or []))
+                                sources=list(sources or []), projector_sigma=fit.intrinsics_sigma[0])
 
 
 # --- stereo path ---------------------------------------------------------------------------------------------
@@ -486,6 +490,7 @@ def calibrate_projector_with_board(board: Board, captures: list[BoardCaptures], 
         per_pose_rms_px=[float(np.sqrt(np.mean(np.sum(r ** 2, axis=1)))) for r in proj_res],
         sources=[pv.source for pv in proj_views],
         warnings=warnings + inverse.warnings,
+        projector_sigma=fit.intrinsics_sigma[1],
     )
 
 

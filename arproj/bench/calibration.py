@@ -12,6 +12,11 @@ calibrate_camera on the same corners (every view kept: the target is the same RM
 end (its own corners, outlier views dropped), as `arproj calibrate camera` runs it.
 
 Simulated site (arproj.sim, seed): the wizard's four steps; each recovered quantity against the truth.
+
+Simulated live calibration (arproj.sim.live in its own process, small images, LIVE_SEEDS seeds; --quick: one):
+`calibrate projector --live --sim` end to end; per recovered quantity the share of seeds whose error lies
+within its reported 95 % bound (target ≥ 95 %), and for the mount the design value's error beside it (the
+peer: the value the product used before).
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import numpy as np
 
 from arproj.bench import BenchTable, cells, column, columns
 from calibration.boards import Board, BoardView, detect_file, parse_board, read_gray
+from calibration.defaults import DEFAULT_BOARD
 from calibration.epipolar import evaluate_pairs
 from calibration.stereo import calibrate_camera, calibrate_stereo, pair_views
 from geometry.intrinsics import Intrinsics
@@ -34,6 +40,8 @@ from geometry.poses import make_pose
 
 REAL_BOARD = "chessboard:9x6:0.025"
 OPENCV_SUBPIX_WINDOW = (11, 11)  # the stereo_calib sample's window
+LIVE_SEEDS = 3
+LIVE_TARGET = 0.95
 SIM_TARGETS = {"camera focal": 0.2, "camera principal point": 1.0, "baseline": 0.5, "projector focal": 0.5,
                "projector principal point": 2.0, "head orientation": 0.05, "head position": 1.0,
                "validation (measured by the stereo pair)": 1.0, "validation (vs true landing points)": 1.0}
@@ -223,6 +231,22 @@ def _sim_figures(sim: dict) -> dict[str, SimFigure]:
     }
 
 
+def simulated_live(seeds: list[int]) -> dict[str, list[dict]]:
+    """Live calibration on the simulated site per seed: {quantity: [truth check per seed]}."""
+    from arproj.cli.calibrate import live_projector_command
+    from arproj.wizard.live_run import LiveOptions
+
+    per_quantity: dict[str, list[dict]] = {}
+    for s in seeds:
+        with tempfile.TemporaryDirectory() as tmp:
+            opts = LiveOptions(screen="", left="", projector_size=(0, 0), rig=Path(tmp) / "rig",
+                               board=DEFAULT_BOARD, stereo_poses=16, head_poses=7, mount_poses=6)
+            summary = live_projector_command(opts, "", sim=True, small=True, seed=s, as_json=True)
+        for name, check in summary["truth"].items():
+            per_quantity.setdefault(name, []).append(check)
+    return per_quantity
+
+
 def run(quick: bool = False, seed: int = 0) -> BenchTable:
     rows: list[CalibrationRow] = []
     headline: dict = {}
@@ -275,6 +299,23 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
                  f"{sim['projector']['quality']['projector_rms_px']:.3f} px; head errors are maxima over 3 head "
                  f"angles not used for fitting; validation at those angles, "
                  f"{sim['validation']['truth_errors']['distance_m']:.2f} m away")
+    live = simulated_live([seed] if quick else [seed + k for k in range(LIVE_SEEDS)])
+    shares = []
+    for name, checks in live.items():
+        share = float(np.mean([c["within"] for c in checks]))
+        shares.append(share)
+        unit = checks[0]["unit"]
+        peer = (f"design value {np.mean([c['design_error'] for c in checks]):.3g} {unit}"
+                if "design_error" in checks[0] else "")
+        rows.append(CalibrationRow(f"sim live: {name} within its 95 % bound", error=f"{100 * share:.0f} % of "
+                                   f"{len(checks)} seeds (mean error {np.mean([c['error'] for c in checks]):.3g} "
+                                   f"{unit}, bound {np.mean([c['bound'] for c in checks]):.3g} {unit})",
+                                   target=f"≥ {100 * LIVE_TARGET:.0f} %", met_or_time=(peer + "; " if peer else "")
+                                   + ("yes" if share >= LIVE_TARGET else "NO")))
+    headline["sim live: quantities within their 95 % bound"] = {
+        "arproj": round(float(np.min(shares)) if shares else 0.0, 3), "unit": " (worst share of seeds)",
+        "target": f"≥ {LIVE_TARGET}", "met": bool(shares) and min(shares) >= LIVE_TARGET, "peer": "–",
+        "peer_name": "simulated truth"}
     return BenchTable(
         name="calibration",
         title="calibration — held-out real stereo pairs vs OpenCV; simulated site vs truth",

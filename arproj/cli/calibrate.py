@@ -4,6 +4,8 @@
     arproj calibrate stereo --left 'DIR/left*.jpg' --right 'DIR/right*.jpg' --board chessboard:9x6:0.025 --out RIG
     arproj calibrate camera --images 'DIR/left*.jpg' --board chessboard:9x6:0.025 --out DIR
     arproj calibrate projector --captures 'DIR/capture_*' --projector 1920x1080 --board chessboard:9x7:0.075 --out DIR
+    arproj calibrate projector --live --screen N|tcp://… --left CAM [--right CAM --head URL [--laser URL]] --rig DIR
+    arproj calibrate projector --live --sim --rig DIR [--stereo N]      the same against the simulated site
 """
 
 from __future__ import annotations
@@ -17,8 +19,10 @@ import typer
 from arproj.console import console, err_console, progress_bar, track
 from calibration.defaults import DEFAULT_BOARD
 from geometry.errors import InputError
+from geometry.plain import plain
 
 if TYPE_CHECKING:
+    from arproj.wizard.live_run import LiveOptions
     from calibration.boards import Board
 
 BOARD_HELP = ("Board spec: chessboard:COLSxROWS:SQUARE_M (inner corners) or "
@@ -196,6 +200,66 @@ def projector_command(captures: str, projector: str, board_spec: str, camera: Pa
     return figures
 
 
+def live_projector_command(opts: LiveOptions, size: str, sim: bool = False, small: bool = False, seed: int = 0,
+                           as_json: bool = False) -> dict:
+    """`calibrate projector --live`: on the devices named in opts, or (sim) on the simulated site started in its
+    own process; prints the figures with their 95 % bounds (and, sim, the errors against its truth)."""
+    from dataclasses import replace
+
+    from arproj.sim.live import SpawnedLiveSite
+    from arproj.wizard.live_run import run_live
+
+    bar = (lambda items, description, total: track(items, description, total=total))  # noqa: E731
+    if not sim:
+        if not opts.screen or not opts.left or not size:
+            raise InputError("--live needs --screen, --left and --projector (or --sim)")
+        summary = run_live(replace(opts, projector_size=_parse_size(size, "--projector")), bar)
+    else:
+        with SpawnedLiveSite(seed=seed, small=small) as site:
+            u = site.urls
+            truth = site.truth()
+            opts = replace(opts, screen=u.screen, left=u.camera_left, right=u.camera_right, head=u.head,
+                           laser=u.laser, mover=u.board, projector_size=site.projector_size)
+            summary = run_live(opts, bar, design_mount=truth["T_robot_from_camera_left_design"], truth=truth)
+    if as_json:
+        print(json.dumps(summary, indent=2, default=plain))
+    else:
+        _print_live(summary)
+    return summary
+
+
+def _print_live(summary: dict) -> None:
+    console.print(f"live calibration ({summary.get('captures', 0)} captures) → {summary['rig']}", highlight=False)
+    if "stereo" in summary:
+        q = summary["stereo"]
+        console.print(f"  stereo RMS {q['reprojection_rms_px']:.3f} px, baseline {1000 * q['baseline_m']:.2f} mm",
+                      highlight=False)
+    p, b = summary["projector"], summary["projector"].get("projector_95") or {}
+    console.print(f"  projector RMS {p['projector_rms_px']:.3f} px from {p['poses_used']} poses: "
+                  + ", ".join(f"{k} {p['projector'][k]:.2f} ± {b.get(k, float('nan')):.2f}" for k in
+                              ("fx", "fy", "cx", "cy")) + " px (95 %)", highlight=False)
+    for line in p.get("warnings", []):
+        console.print(f"  [yellow]warning:[/] {line}", highlight=False)
+    if "mount" in summary:
+        m = summary["mount"]
+        console.print(f"  mount from the laser ({m['views']} panel poses, laser RMS {m['laser_rms_mm']:.1f} mm): "
+                      f"± {m['mount_95']['rotation_deg']:.3f}°, ± {m['mount_95']['position_mm']:.2f} mm (95 %)"
+                      + ("" if m["adopted"] else "; less certain than the design value "
+                         f"(± {m['design_tolerance_95']['rotation_deg']}°, ± {m['design_tolerance_95']['position_mm']} "
+                         "mm): the rig keeps the design value"), highlight=False)
+    if "head" in summary:
+        h = summary["head"]
+        console.print(f"  head model residual {h['rotation_rms_deg']:.4f}° / {h['position_rms_mm']:.3f} mm from "
+                      f"{h['poses']} poses", highlight=False)
+        for c in h["check_angles"]:
+            console.print(f"    projector pose at {[round(a, 2) for a in c['angles_deg']]}: ± "
+                          f"{c['rotation_95_deg']:.4f}°, ± {c['position_95_mm']:.2f} mm (95 %)", highlight=False)
+    for name, t in summary.get("truth", {}).items():
+        extra = f" (design value: {t['design_error']:.3g} {t['unit']})" if "design_error" in t else ""
+        console.print(f"  vs simulated truth: {name} error {t['error']:.3g} {t['unit']}, bound {t['bound']:.3g} "
+                      f"{t['unit']}: {'within' if t['within'] else 'OUTSIDE'}{extra}", highlight=False)
+
+
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     del bench_app
     calibrate_app = typer.Typer(help="Calibrate cameras, projector and pan/tilt head. Without a subcommand: "
@@ -290,16 +354,59 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
     @calibrate_app.command("projector")
     def projector(
-        captures: str = typer.Option(..., "--captures", help="Glob of the capture folders, one per board pose: "
+        captures: str = typer.Option("", "--captures", help="Glob of the capture folders, one per board pose: "
                                      "Gray code images in GrayCodePattern.generate() order, then white, black."),
-        size: str = typer.Option(..., "--projector", help="Projector resolution WIDTHxHEIGHT."),
-        board: str = typer.Option("chessboard:9x7:0.075", "--board", help="Printed board spec."),
+        size: str = typer.Option("", "--projector", help="Projector resolution WIDTHxHEIGHT."),
+        board: str = typer.Option("", "--board", help="Printed board spec (default: chessboard:9x7:0.075 for "
+                                  f"--captures, {DEFAULT_BOARD} live)."),
         camera: Path | None = typer.Option(None, "--camera", help="camera_info YAML of the camera (else the "
                                            "camera is calibrated from the same captures)."),
-        out: Path = typer.Option(..., "--out", help="Folder for projector.yaml, camera.yaml and the figures."),
+        out: Path | None = typer.Option(None, "--out", help="Folder for projector.yaml, camera.yaml and the "
+                                        "figures (--captures)."),
+        live: bool = typer.Option(False, "--live", help="Show the Gray code on the beamer and capture it now."),
+        screen: str = typer.Option("", "--screen", help="Live: the beamer's display number (a fullscreen "
+                                   "window) or tcp://HOST:PORT (a screen server, e.g. the simulated site's)."),
+        left: str = typer.Option("", "--left", help="Live: the left camera (index, file or stream URL)."),
+        right: str = typer.Option("", "--right", help="Live: the right camera; with it the projector is found "
+                                  "from triangulated wall points at the head's angles, and the head is fitted."),
+        head: str = typer.Option("", "--head", help="Live: the Pelco-D head's URL (/dev/ttyUSB0, socket://…)."),
+        laser: str = typer.Option("", "--laser", help="Live: the laser's scan endpoint (JSON over HTTP); with it "
+                                  "the cameras' mount on the robot is calibrated."),
+        mover: str = typer.Option("", "--mover", help="Live: a URL that moves the board (the simulated site's "
+                                  "person); without it you are asked to move the board and press Enter."),
+        rig: Path | None = typer.Option(None, "--rig", help="Live: the rig folder (read, and written to)."),
+        sim: bool = typer.Option(False, "--sim", help="Live: start the simulated site in its own process and use "
+                                 "its screen, cameras, head, laser and board mover."),
+        small: bool = typer.Option(False, "--small", help="--sim: 640x400 cameras and a 320x200 projector."),
+        seed: int = typer.Option(0, "--seed", help="--sim: seed of the simulated site."),
+        stereo: int = typer.Option(0, "--stereo", min=0, help="Live: first calibrate the stereo pair from this "
+                                   "many board views."),
+        poses: int = typer.Option(5, "--poses", min=3, help="Live, one camera: board poses on the wall."),
+        head_poses: int = typer.Option(0, "--head-poses", min=0, help="Live: head angles of the plan to use "
+                                       "(0: all; at least 7 for the head)."),
+        mount_poses: int = typer.Option(8, "--mount-poses", min=4, help="Live: panel poses for the mount."),
+        settle: float = typer.Option(0.15, "--settle", help="Live: seconds to wait after showing a pattern."),
+        settle_timeout: float = typer.Option(10.0, "--settle-timeout", help="Live: give up when no two frames "
+                                             "agree within this many seconds."),
         as_json: bool = typer.Option(False, "--json", help="Print the quality figures as JSON."),
     ) -> None:
-        """Projector calibration with one camera and a printed board (Moreno & Taubin local homographies)."""
-        projector_command(captures, size, board, camera, out, as_json)
+        """Projector calibration: from capture folders (one camera and a printed board, Moreno & Taubin), or
+        --live: the Gray code shown on the beamer and captured; with two cameras also the head and (--laser)
+        the cameras' mount. Every recovered quantity is given with its 95 % bound."""
+        if not live:
+            if not captures or not size or out is None:
+                raise InputError("--captures, --projector and --out are needed (or --live)",
+                                 "see `arproj calibrate projector --help`")
+            projector_command(captures, size, board or "chessboard:9x7:0.075", camera, out, as_json)
+            return
+        if rig is None:
+            raise InputError("--live needs --rig DIR (the rig folder to read and write)")
+        from arproj.wizard.live_run import LiveOptions
+
+        opts = LiveOptions(screen=screen, left=left, projector_size=(0, 0), rig=rig, right=right or None,
+                           head=head or None, laser=laser or None, mover=mover or None, board=board or DEFAULT_BOARD,
+                           poses=poses, head_poses=head_poses or None, mount_poses=mount_poses,
+                           stereo_poses=stereo, settle_s=settle, settle_timeout_s=settle_timeout)
+        live_projector_command(opts, size, sim, small, seed, as_json)
 
     app.add_typer(calibrate_app, name="calibrate")

@@ -1,4 +1,5 @@
-"""Where frames go: the beamer (a borderless fullscreen window on a chosen display) and files.
+"""Where frames go: the beamer (a borderless fullscreen window on a chosen display, or a screen reached over the
+network, such as the simulated site's), and files.
 
 Every output takes RGB frames (h, w, 3) uint8 at the projector's resolution. A person-fixable problem — no
 display, a display whose size is not the projector's — is an InputError saying what to do; the session then
@@ -9,6 +10,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+import socket
+import struct
 from pathlib import Path
 from typing import Protocol
 
@@ -214,3 +217,51 @@ def _window_process(conn: object, width: int, height: int, screen: int, allow_si
             data = np.frombuffer(buffer.get_data("RGB", buffer.width * 3), dtype=np.uint8)
             conn.send(("image", data.reshape(buffer.height, buffer.width, 3)[::-1].copy()))  # type: ignore
     window.close()
+
+
+SCREEN_REPLY_TIMEOUT_S = 10.0
+
+
+class ScreenStream:
+    """A screen at tcp://HOST:PORT that shows the frames sent to it (the simulated site's virtual screen, or a
+    small display server beside a real beamer): each frame goes as a 4-byte big-endian length and a PNG, and
+    show() returns once the screen answered with the line "ok" (an "error: …" line is an InputError naming it)."""
+
+    def __init__(self, url: str, timeout_s: float = SCREEN_REPLY_TIMEOUT_S) -> None:
+        self.url = url
+        host, _, port = url.removeprefix("tcp://").rpartition(":")
+        if not url.startswith("tcp://") or not host or not port.isdigit():
+            raise InputError(f"screen {url!r} is not tcp://HOST:PORT", "e.g. --screen tcp://127.0.0.1:5000")
+        try:
+            self._sock = socket.create_connection((host, int(port)), timeout=timeout_s)
+        except OSError as err:
+            raise InputError(f"screen {url}: cannot connect ({err.strerror or err})",
+                             "start the screen server (e.g. `python -m arproj.sim.live`) or check the URL") from None
+        self._reader = self._sock.makefile("rb")
+
+    def show(self, frame: NDArray[np.uint8]) -> None:
+        frame = as_rgb(frame)
+        ok, png = cv2.imencode(".png", cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+        if not ok:
+            raise ValueError("could not encode the frame as PNG")
+        try:
+            self._sock.sendall(struct.pack(">I", len(png)) + png.tobytes())
+            reply = self._reader.readline()
+        except OSError as err:
+            raise InputError(f"screen {self.url}: {err.strerror or err}", "check that the screen server runs"
+                             ) from None
+        if reply != b"ok\n":
+            raise InputError(f"screen {self.url}: {reply.decode(errors='replace').strip() or 'no answer'}",
+                             "check the projector size the screen expects")
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):
+            self._reader.close()
+            self._sock.close()
+
+
+def open_screen(screen: str, width: int, height: int) -> FrameOutput:
+    """--screen N (a display: the beamer window, exactly width x height) or tcp://HOST:PORT (a ScreenStream)."""
+    if screen.isdigit():
+        return BeamerWindow(width, height, screen=int(screen))
+    return ScreenStream(screen)

@@ -94,6 +94,15 @@ def camera_poses(config: dict) -> tuple[NDArray[np.float64], NDArray[np.float64]
     return T_robot_from_left, invert(T_left_from_right)
 
 
+def mount_error(config: dict, rng: np.random.Generator) -> NDArray[np.float64]:
+    """T_robot_from_robot': how far the stereo pair's true mount is from its design (section `cameras`,
+    mount_error_deg / mount_error_m, σ per axis), applied in the robot frame; the identity when both are 0."""
+    v = rng.standard_normal(3) * np.radians(config["mount_error_deg"])
+    t = rng.standard_normal(3) * config["mount_error_m"]
+    angle = float(np.linalg.norm(v))
+    return make_pose(np.eye(3) if angle == 0 else rotation_about(v, angle), t)
+
+
 def camera_intrinsics(config: dict, right: bool = False) -> Intrinsics:
     c = dict(config)
     if right:

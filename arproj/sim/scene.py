@@ -49,6 +49,7 @@ _RULES: dict[str, str] = {
     "cameras.full_well_e": _POSITIVE, "cameras.read_noise_e": _NON_NEGATIVE, "cameras.gamma": _POSITIVE,
     "cameras.aperture_mm": _NON_NEGATIVE, "cameras.focus_distance_m": _POSITIVE,
     "cameras.lens_blur_px": _NON_NEGATIVE, "cameras.prnu": _FRACTION,
+    "cameras.mount_error_deg": _NON_NEGATIVE, "cameras.mount_error_m": _NON_NEGATIVE,
     "laser.fov_deg": _POSITIVE, "laser.resolution_deg": _POSITIVE, "laser.range_max_m": _POSITIVE,
     "laser.range_sigma_m": _NON_NEGATIVE, "laser.outlier_fraction": _FRACTION,
     "rangecam.width": _POSITIVE, "rangecam.height": _POSITIVE, "rangecam.hfov_deg": _POSITIVE,
@@ -243,7 +244,8 @@ def _validate(scene: Scene, source: str) -> None:
     right = {}
     for k, v in cams["right"].items():
         key = f"cameras.right.{k}"
-        pair_keys = {"right", "baseline_m", "position_m", "pitch_deg", "toe_in_deg", "color", "msaa_samples"}
+        pair_keys = {"right", "baseline_m", "position_m", "pitch_deg", "toe_in_deg", "color", "msaa_samples",
+                     "mount_error_deg", "mount_error_m"}
         if k in pair_keys or k not in cams:
             allowed = sorted(set(cams) - pair_keys)
             raise InputError(f"{source}: unknown key {key!r} (value {v!r})", f"the right camera may override "

@@ -33,6 +33,7 @@ from arproj.sim.robot import (
     camera_intrinsics,
     camera_poses,
     floor_pose,
+    mount_error,
     nominal_head,
     place_in_front_of_wall,
     projector_intrinsics,
@@ -58,7 +59,7 @@ CAMERAS = ("camera_left", "camera_right")
 MIN_CLEARANCE_M = 0.05       # cameras and projector must be this far inside the room
 MAX_AIM_INCIDENCE_DEG = 85.0  # steeper than this, the projector counts as facing away from the wall
 VIEW_CACHE_SIZE = 4          # camera views kept (both cameras at two poses)
-_STREAMS = ("room", "head", "drive", "localization", "photo", "laser", "range", "sensor")
+_STREAMS = ("room", "head", "drive", "localization", "photo", "laser", "range", "sensor", "mount")
 
 
 @dataclass
@@ -247,7 +248,9 @@ class Site:
         self.camera_models = {
             "camera_left": optics.CameraModel.from_config(self.camera_left, cams, self._rng["sensor"]),
             "camera_right": optics.CameraModel.from_config(self.camera_right, right_config, self._rng["sensor"])}
-        self.T_robot_from_camera_left, self.T_camera_right_from_camera_left = camera_poses(cams)
+        self.T_robot_from_camera_left_design, self.T_camera_right_from_camera_left = camera_poses(cams)
+        # The pair as mounted: its drawing off by cameras.mount_error_* (0 by default: the design is the truth).
+        self.T_robot_from_camera_left = mount_error(cams, self._rng["mount"]) @ self.T_robot_from_camera_left_design
         laser = scene["laser"]
         self.T_robot_from_laser = make_pose(None, laser["position_m"])
         self.targets: list[Target] = []

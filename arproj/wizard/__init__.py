@@ -109,7 +109,7 @@ def run_wizard(out: Path, sim: bool = False, restart: bool = False, seed: int = 
                 result["truth_errors"] = steps.projector_truth_errors(rig, station.truth)
             elif step == "head":
                 measurements = state["steps"]["projector"]["measurements"]
-                result, rig = steps.step_head(_need(rig, out), out, measurements,
+                result, rig, _ = steps.step_head(_need(rig, out), out, measurements,
                                               station.T_robot_from_camera_left_design)
                 result["truth_errors"] = steps.head_truth_errors(station, rig)
             else:

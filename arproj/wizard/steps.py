@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from calibration.boards import Board, BoardView, parse_board
-from calibration.head import fit_head, head_plan, rebase_head
+from calibration.head import HeadFit, fit_head, head_plan, rebase_head
 from calibration.projector import calibrate_inverse_camera
 from calibration.stereo import calibrate_stereo, coverage_advice
 from calibration.validation import (
@@ -118,18 +118,19 @@ def step_projector(station: Station, rig: Rig, out: Path, track: Track) -> tuple
     return {"quality": calib.quality() | {"head_angles_skipped": skipped}, "measurements": measurements}, rig
 
 
-def step_head(rig: Rig, out: Path, measurements: list[dict], T_robot_from_camera_left: NDArray[np.float64]
-              ) -> tuple[dict, Rig]:
-    """Fit the head model to the projector poses measured in the projector step."""
+def step_head(rig: Rig, out: Path, measurements: list[dict], T_robot_from_camera_left: NDArray[np.float64],
+              fixed_joints: tuple[int, ...] = ()) -> tuple[dict, Rig, HeadFit]:
+    """Fit the head model to the projector poses measured in the projector step (fixed_joints: joints the head
+    does not have, e.g. roll on a pan/tilt head)."""
     angles = [np.asarray(m["angles_deg"]) for m in measurements]
     poses = [np.asarray(m["T_camera_left_from_projector"]) for m in measurements]
-    fit = fit_head(angles, poses)
+    fit = fit_head(angles, poses, fixed_joints=fixed_joints)
     # The model is fitted in camera_left's frame; the rig keeps it in the robot frame.
     rig.head = rebase_head(fit.model, T_robot_from_camera_left)
     rig.poses["T_robot_from_camera_left"] = np.asarray(T_robot_from_camera_left, dtype=np.float64)
     rig.quality["head"] = fit.quality()
     rig.save(out)
-    return {"quality": fit.quality()}, rig
+    return {"quality": fit.quality()}, rig, fit
 
 
 def predicted_T_left_from_projector(rig: Rig, angles: NDArray[np.float64]) -> NDArray[np.float64]:

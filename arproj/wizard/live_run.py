@@ -1,0 +1,117 @@
+"""`arproj calibrate projector --live`: the whole live calibration on a LiveStation, in one command.
+
+Order (each result is written to the rig folder before the next starts):
+1. stereo (only with --stereo N): N board views from both cameras → camera_left/right, rig.yaml;
+2. projector: one camera → the printed board on the wall at --poses poses, the Gray code at each (Moreno &
+   Taubin; the camera from the rig if it has camera_left, else calibrated too); two cameras → the Gray code at
+   each head angle of the pan/tilt plan (--head-poses), triangulated (the rig's stereo pair);
+3. mount (two cameras and --laser): the board on a panel across the laser's plane at --mount-poses poses;
+4. head (two cameras): the head model from the projector's poses of step 2, rebased to the robot frame with
+   the mount of step 3 (or the rig's T_robot_from_camera_left, the design value); the projector's predicted
+   pose at the plan's check angles with its 95 % bounds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from arproj.wizard.live_station import SETTLE_S, BoardMover, LiveStation, PersonMover, UrlMover
+from arproj.wizard.live_steps import (
+    pan_tilt_plan,
+    step_head_live,
+    step_mount,
+    step_projector_board,
+    step_projector_stereo,
+    truth_check,
+)
+from arproj.wizard.steps import Track, step_stereo
+from calibration.boards import parse_board
+from calibration.capture import SETTLE_TIMEOUT_S
+from geometry.errors import InputError
+from geometry.rig import RIG_FILE, Rig
+
+MOUNT_POSE = "T_robot_from_camera_left"
+
+
+@dataclass
+class LiveOptions:
+    screen: str
+    left: str
+    projector_size: tuple[int, int]
+    rig: Path
+    right: str | None = None
+    head: str | None = None
+    laser: str | None = None
+    mover: str | None = None  # a URL (the simulated site's person), else a person at the keyboard
+    board: str = ""
+    poses: int = 5
+    head_poses: int | None = None
+    mount_poses: int = 8
+    stereo_poses: int = 0
+    settle_s: float = SETTLE_S
+    settle_timeout_s: float = SETTLE_TIMEOUT_S
+
+
+def run_live(opts: LiveOptions, track: Track, design_mount: np.ndarray | None = None,
+             truth: dict | None = None) -> dict[str, Any]:
+    """Run the live calibration; returns the summary (figures with their 95 % bounds; vs truth if given)."""
+    board = parse_board(opts.board)
+    mover: BoardMover = UrlMover(opts.mover) if opts.mover else PersonMover()
+    rig_dir = opts.rig
+    rig = Rig.load(rig_dir) if (rig_dir / RIG_FILE).exists() else Rig()
+    if design_mount is not None and MOUNT_POSE not in rig.poses:
+        rig.poses[MOUNT_POSE] = np.asarray(design_mount, dtype=np.float64)
+    summary: dict[str, Any] = {"rig": str(rig_dir)}
+    with LiveStation.open(opts.screen, opts.projector_size, opts.left, opts.right, opts.head, mover, opts.laser,
+                          opts.settle_s, opts.settle_timeout_s) as station:
+        if opts.stereo_poses:
+            if opts.right is None:
+                raise InputError("--stereo calibrates the stereo pair", "give --right CAM too")
+            result, stereo_rig = step_stereo(station, rig_dir, opts.board, opts.stereo_poses)
+            rig.intrinsics.update(stereo_rig.intrinsics)
+            rig.poses.update(stereo_rig.poses)
+            rig.quality["stereo"] = stereo_rig.quality["stereo"]
+            rig.save(rig_dir)
+            summary["stereo"] = result["quality"]
+        if opts.right is None:
+            camera = rig.intrinsics.get("camera_left")
+            calib = step_projector_board(station, board, opts.poses, camera, track)
+            rig.intrinsics["projector"] = calib.projector
+            if camera is None and calib.camera is not None:
+                rig.intrinsics["camera_left"] = calib.camera
+            rig.quality["projector"] = {"rms_px": round(calib.projector_rms_px, 4),
+                                        "poses": len(calib.T_projector_from_view),
+                                        "projector_95": calib.quality()["projector_95"],
+                                        "method": "live Gray code, one camera and a printed board"}
+            rig.save(rig_dir)
+            summary["projector"] = calib.quality()
+            summary["captures"] = station.captures
+            if truth is not None:
+                summary["truth"] = truth_check(truth, projector=calib)
+            return summary
+        if "camera_left" not in rig.intrinsics or "camera_right" not in rig.intrinsics:
+            raise InputError(f"{rig_dir / RIG_FILE}: no calibrated stereo pair (camera_left, camera_right)",
+                             "run `arproj calibrate stereo … --out RIG` first, or add --stereo N")
+        fit_angles, check_angles = pan_tilt_plan(station.aim_deg, opts.head_poses)
+        result, rig, calib = step_projector_stereo(station, rig, rig_dir, fit_angles, track)
+        summary["projector"] = result["quality"]
+        mount = None
+        if opts.laser is not None:
+            if MOUNT_POSE not in rig.poses:
+                raise InputError(f"{rig_dir / RIG_FILE}: no {MOUNT_POSE} to start the mount from",
+                                 f"add the design value of the cameras' mount as poses: {MOUNT_POSE} (4x4)")
+            mount_result, mount = step_mount(station, rig, rig_dir, board, opts.mount_poses, rig.poses[MOUNT_POSE])
+            summary["mount"] = mount_result["quality"]
+        if MOUNT_POSE not in rig.poses:
+            raise InputError(f"{rig_dir / RIG_FILE}: no {MOUNT_POSE} to put the head model in the robot frame",
+                             "give --laser URL to calibrate it, or add its design value to rig.yaml's poses")
+        head = step_head_live(rig, rig_dir, result["measurements"], rig.poses[MOUNT_POSE], check_angles)
+        summary["head"] = head["quality"]
+        summary["captures"] = station.captures
+        if truth is not None:
+            summary["truth"] = truth_check(truth, projector=calib, rig=Rig.load(rig_dir), head=head, mount=mount)
+    return summary

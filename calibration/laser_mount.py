@@ -1,0 +1,167 @@
+"""The stereo pair's mount on the robot, T_robot_from_camera_left, from the 2-D laser and a board (Zhang & Pless).
+
+Why the laser: the robot frame is the body's, and of everything on the robot only the laser is fixed to the body
+with a known pose (T_robot_from_laser; its scan is in the robot frame). The cameras see the projector on the head,
+but the head's own kinematics in the robot frame are a design value too (axes off by tenths of a degree, an
+angle bias), so a hand–eye solve against head poses would hand the head's design error on to the mount. The
+laser meets the cameras on a shared plane instead: a board printed at the top of a tall panel standing on the
+floor, leaning back and turned a little differently each time. The camera gives the board's plane
+(n·x = d in camera_left, from its pose by PnP); the laser's scan line crosses the panel lower down, and those
+points, taken into camera_left by the unknown mount, must lie on that plane (Zhang & Pless 2004). Walls alone
+would not do: vertical planes cut by a horizontal scan leave the mount's pitch, roll and height free; a panel
+leaning back at several angles fixes all six.
+
+Unknowns: a rotation vector ω (applied in the robot frame) and an offset δt of the mount from its design
+value. Residuals: n·(T_camera_left_from_robot · p) − d per laser point on the panel, metres. Points are picked
+by the design mount (within GATE_M of the predicted plane and within the printed board's width), then by the
+fit (RESIDUAL_GATE_SIGMAS). Uncertainty: the unweighted least squares' sandwich (JᵀJ)⁻¹ (Σ_k J_kᵀ Σ_k J_k)
+(JᵀJ)⁻¹, where view k's residuals have covariance σ²·I (σ from the residuals: range noise) plus A_k Σ_k Aᵀ_k,
+the board pose's own covariance (from PnP's Jacobian and its corner residuals) carried to the residuals. The
+camera's intrinsics are taken as exact.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+from scipy.optimize._numdiff import approx_derivative
+
+from calibration.boards import BoardView
+from calibration.camera_model import solve_pnp
+from geometry.errors import InputError
+from geometry.intrinsics import Intrinsics
+from geometry.poses import invert, make_pose, pose_from_rvec_tvec, rotation_matrix, rotation_vector
+
+GATE_M = 0.08  # laser points this close to the plane the design mount predicts are candidates
+RESIDUAL_GATE_SIGMAS = 4.0
+MIN_POINTS_PER_VIEW = 20
+MIN_VIEWS = 4
+CHI2_3_95 = 7.814727903251178  # 95 % quantile of χ² with 3 degrees of freedom
+
+
+@dataclass
+class BoardPlaneView:
+    """A board seen by camera_left: T_camera_from_board, the covariance of its (rvec, tvec), and its extent
+    along the board's x axis (m), where the laser may meet it."""
+
+    T_camera_from_board: NDArray[np.float64]
+    covariance: NDArray[np.float64]
+    x_range_m: tuple[float, float]
+    source: str = ""
+
+
+def board_plane_view(view: BoardView, camera: Intrinsics) -> BoardPlaneView:
+    """The board's pose from its corners (PnP) and that pose's covariance s²·(JᵀJ)⁻¹."""
+    x = solve_pnp(view.object_points, view.image_points, camera.K, camera.dist_array)
+    projected, jac = cv2.projectPoints(view.object_points, x[:3], x[3:], camera.K, camera.dist_array)
+    r = (projected.reshape(-1, 2) - view.image_points).ravel()
+    J = jac[:, :6]
+    s2 = float(r @ r) / max(len(r) - 6, 1)
+    xs = view.object_points[:, 0]
+    return BoardPlaneView(pose_from_rvec_tvec(x[:3], x[3:]), s2 * np.linalg.pinv(J.T @ J),
+                          (float(xs.min()), float(xs.max())), view.source)
+
+
+@dataclass
+class MountFit:
+    T_robot_from_camera_left: NDArray[np.float64]
+    covariance: NDArray[np.float64]  # 6x6 of (ω rad, δt m), robot frame
+    rms_m: float
+    points_per_view: list[int]
+    sources: list[str] = field(default_factory=list)
+
+    def bounds_95(self) -> dict[str, float]:
+        """95 % bounds: the largest semi-axis of the rotation's (degrees) and the offset's (mm) ellipsoid."""
+        rot = np.sqrt(CHI2_3_95 * np.linalg.eigvalsh(self.covariance[:3, :3]).max())
+        pos = np.sqrt(CHI2_3_95 * np.linalg.eigvalsh(self.covariance[3:, 3:]).max())
+        return {"rotation_deg": float(np.degrees(rot)), "position_mm": float(1000 * pos)}
+
+    def quality(self) -> dict:
+        return {"laser_rms_mm": round(1000 * self.rms_m, 3), "views": len(self.points_per_view),
+                "laser_points_per_view": self.points_per_view,
+                "mount_95": {k: round(v, 4) for k, v in self.bounds_95().items()},
+                "covariance": self.covariance.tolist()}
+
+
+def mount_errors(T_est: NDArray[np.float64], T_true: NDArray[np.float64]) -> tuple[NDArray[np.float64],
+                                                                                    NDArray[np.float64]]:
+    """(rotation vector ω with R_est = R(ω) R_true, rad; offset t_est − t_true, m): the fit's parameters."""
+    return rotation_vector(T_est[:3, :3] @ T_true[:3, :3].T), T_est[:3, 3] - T_true[:3, 3]
+
+
+def within_bound(error: NDArray[np.float64], covariance: NDArray[np.float64]) -> bool:
+    """Whether a 3-vector error lies inside the 95 % ellipsoid of its covariance (Mahalanobis vs χ²₃)."""
+    e = np.asarray(error, dtype=np.float64)
+    return float(e @ np.linalg.pinv(covariance) @ e) <= CHI2_3_95
+
+
+def _residuals(params: NDArray[np.float64], T0: NDArray[np.float64], planes: list[NDArray[np.float64]],
+               points: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
+    T = make_pose(rotation_matrix(params[:3]) @ T0[:3, :3], T0[:3, 3] + params[3:6])
+    T_cam_from_robot = invert(T)
+    out = []
+    for q, p in zip(planes, points, strict=True):
+        R_cb = rotation_matrix(q[:3])
+        n, d = R_cb[:, 2], float(R_cb[:, 2] @ q[3:])
+        pc = p @ T_cam_from_robot[:3, :3].T + T_cam_from_robot[:3, 3]
+        out.append(pc @ n - d)
+    return out
+
+
+def calibrate_mount(views: list[BoardPlaneView], scans_robot: list[NDArray[np.float64]],
+                    T_robot_from_camera_left_design: NDArray[np.float64]) -> MountFit:
+    """The mount from board views (camera_left) and the laser scans taken at the same time (robot frame)."""
+    if len(views) != len(scans_robot):
+        raise InputError(f"mount calibration: {len(views)} board views but {len(scans_robot)} laser scans")
+    T0 = np.asarray(T_robot_from_camera_left_design, dtype=np.float64)
+    planes = [np.concatenate([rotation_vector(v.T_camera_from_board[:3, :3]), v.T_camera_from_board[:3, 3]])
+              for v in views]
+    # Candidates: near the plane the design mount predicts, and within the printed board's width.
+    picked, used, sources = [], [], []
+    for k, (v, scan) in enumerate(zip(views, scans_robot, strict=True)):
+        scan = np.asarray(scan, dtype=np.float64).reshape(-1, 3)
+        r = _residuals(np.zeros(6), T0, [planes[k]], [scan])[0]
+        in_board = invert(v.T_camera_from_board) @ invert(T0)
+        xb = scan @ in_board[:3, :3].T[:, 0] + in_board[0, 3]
+        keep = (np.abs(r) < GATE_M) & (xb >= v.x_range_m[0]) & (xb <= v.x_range_m[1])
+        if keep.sum() >= MIN_POINTS_PER_VIEW:
+            picked.append(scan[keep])
+            used.append(k)
+            sources.append(v.source)
+    if len(used) < MIN_VIEWS:
+        raise InputError(f"mount calibration: the laser met the board's panel in {len(used)} of {len(views)} "
+                         f"views; at least {MIN_VIEWS} are needed",
+                         "stand the panel on the floor in front of the robot, across the laser's plane, leaning "
+                         "back by 0-25° and turned by up to ±25°")
+    planes = [planes[k] for k in used]
+    views = [views[k] for k in used]
+    x = np.zeros(6)
+    for _ in range(4):  # refit, dropping points the fit puts beyond RESIDUAL_GATE_SIGMAS (laser outliers)
+        sol = least_squares(lambda v, pts=picked: np.concatenate(_residuals(v, T0, planes, pts)), x, method="lm",
+                            xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        x = sol.x
+        res = _residuals(x, T0, planes, picked)
+        sigma = float(np.sqrt(np.mean(np.concatenate(res) ** 2)))
+        kept = [np.abs(r) <= RESIDUAL_GATE_SIGMAS * sigma for r in res]
+        if all(k.all() for k in kept):
+            break
+        picked = [p[k] for p, k in zip(picked, kept, strict=True)]
+    res = _residuals(x, T0, planes, picked)
+    r_all = np.concatenate(res)
+    var = float(r_all @ r_all) / max(len(r_all) - 6, 1)
+    J = approx_derivative(lambda v: np.concatenate(_residuals(v, T0, planes, picked)), x, method="3-point")
+    A = np.linalg.pinv(J.T @ J)
+    middle = np.zeros((6, 6))
+    start = 0
+    for k, (q, p) in enumerate(zip(planes, picked, strict=True)):
+        Jk = J[start:start + len(p)]
+        start += len(p)
+        Ak = approx_derivative(lambda qq, k=k: _residuals(x, T0, [qq], [picked[k]])[0], q, method="3-point")
+        Sk = var * np.eye(len(p)) + Ak @ views[k].covariance @ Ak.T
+        middle += Jk.T @ Sk @ Jk
+    T = make_pose(rotation_matrix(x[:3]) @ T0[:3, :3], T0[:3, 3] + x[3:6])
+    return MountFit(T, A @ middle @ A, float(np.sqrt(var)), [len(p) for p in picked], sources)

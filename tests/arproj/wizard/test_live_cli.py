@@ -1,0 +1,41 @@
+"""`arproj calibrate projector --live --sim` end to end: the simulated site in its own process (screen, cameras,
+head, laser, board mover), the stereo pair, the projector from the Gray code, the mount and the head, each with
+its 95 % bound, against the site's truth."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from arproj.cli import app
+from geometry.rig import Rig
+
+
+@pytest.mark.gl
+def test_live_calibration_through_the_cli(tmp_path: Path) -> None:
+    rig_dir = tmp_path / "rig"
+    done = CliRunner().invoke(app, ["calibrate", "projector", "--live", "--sim", "--small", "--seed", "0",
+                                    "--rig", str(rig_dir), "--stereo", "16", "--head-poses", "7",
+                                    "--mount-poses", "6", "--json"])
+    assert done.exit_code == 0, done.output
+    summary = json.loads(done.output[done.output.index("{"):])
+    truth = summary["truth"]
+    p = summary["projector"]
+    # Every figure comes with a bound (that the bound holds in 95 % of seeds is the bench's row, not a test: it
+    # does not yet); the principal point within 2 px (the bench's simulated target), the focal length within 1 %.
+    assert set(p["projector_95"]) == {"fx", "fy", "cx", "cy"}
+    assert all(truth[f"projector {k}"]["bound"] > 0 for k in ("fx", "fy", "cx", "cy")), truth
+    assert abs(truth["projector cx"]["error"]) < 2.0 and abs(truth["projector cy"]["error"]) < 2.0, truth
+    assert abs(truth["projector fx"]["error"]) < 0.01 * p["projector"]["fx"]
+    assert len(summary["head"]["check_angles"]) == 3
+    assert all(truth[f"head check {k} position"]["error"] < 15.0 for k in (1, 2, 3))  # mm, at 2 m
+    m = summary["mount"]
+    assert m["adopted"] == (m["mount_95"]["rotation_deg"] <= 1.0 and m["mount_95"]["position_mm"] <= 10.0)
+    rig = Rig.load(rig_dir)
+    assert {"camera_left", "camera_right", "projector"} <= set(rig.intrinsics) and rig.head is not None
+    assert "projector_95" in rig.quality["projector"] and "check_angles_95" in rig.quality["head"]
+    assert truth["mount rotation"]["design_error"] > 0  # the site's mount is off its drawing
+    assert summary["captures"] > 7 * 36  # every Gray-code pattern at every head angle was shown and captured
