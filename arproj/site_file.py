@@ -208,9 +208,10 @@ class _Fields:
 
     def get(self, name: str) -> Any:
         node: Any = self.entry
-        for part in name.split("."):
+        parts = name.split(".")
+        for k, part in enumerate(parts):
             if not isinstance(node, dict) or part not in node:
-                raise InputError(f"{self.path}: walls.{self.key}.{name} is missing", RESCAN)
+                raise InputError(f"{self.path}: walls.{self.key}.{'.'.join(parts[:k + 1])} is missing", RESCAN)
             node = node[part]
         return node
 
