@@ -41,7 +41,7 @@ def scanned(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
     """A simulated scan of the plate (in-process site, no log needed for the site file) and its site file,
     with the entry as the scan made it in memory."""
     folder = tmp_path_factory.mktemp("site")
-    wall, path = resolve_wall(WALL)
+    wall = resolve_wall(WALL)[0]
     result = scan_simulated(wall, ScanSettings(plan="adaptive", seed=SEED, serial=False)).result
     site_path = folder / "site.yaml"
     assert write_site(site_path, KEY, wall, result, folder / "scan.db") is False
@@ -191,7 +191,7 @@ def test_project_on_a_head_served_by_devices_serve(tmp_path: Path) -> None:
         truth = result["registration"]["truth"]
         assert truth["aim_error_mm"] < 4.0 * result["registration"]["sigma_mm"], truth
         serve.send_signal(signal.SIGINT)
-        out, err = serve.communicate(timeout=30)
+        _, err = serve.communicate(timeout=30)
         assert serve.returncode == 130, err
     finally:
         if serve.poll() is None:
