@@ -37,7 +37,7 @@ from devices.robotbase import RobotBase
 from devices.sim import FaultConfig
 from devices.wallscanner import WallScanner
 from geometry.errors import InputError
-from scanner.laser import HEADS, LaserConfig, Scan, fix_from_scans, pose_from_fix
+from scanner.laser import HEADS, LaserConfig, Scan, fix_from_scans, pose_from_fix, room_from_scans
 from scanner.plan import DriveConfig, FrameTarget, PassSpec, move_position, move_time
 from scanner.sensor_model import SensorConfig
 from scanner.sim.devices import SiteServers
@@ -184,7 +184,7 @@ class DeviceRobot:
         else:
             assert self.operator is not None
             self.operator(frame)
-        fix = None
+        fix = room = None
         if self.laser is not None:
             laser = self.laser
 
@@ -198,10 +198,11 @@ class DeviceRobot:
                 if self.base is None:  # nothing else says where the robot stands
                     raise DeviceError(f"frame {frame.frame_id}: the laser cannot fix the robot ({err})",
                                       "clear the laser's view of the side walls and the floor, then resume") from None
+            room = room_from_scans(scans[0], scans[1], seed=frame.frame_id)
         if self.base is None:
             assert fix is not None
             estimate, cov = pose_from_fix(fix)
-        return FrameReport(commanded, estimate, cov, true, fix)
+        return FrameReport(commanded, estimate, cov, true, fix, room)
 
     def close(self) -> None:
         for link in (self.laser_link, self.base_link):

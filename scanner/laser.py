@@ -25,6 +25,7 @@ the same), `fix_from_scans` the fix of one turn of each head.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -147,27 +148,47 @@ def _fit_line(p: NDArray[np.float64], inliers: NDArray[np.bool_], swap: bool, wh
     return float(coef[0]), float(coef[1]), rm, sigma2 * np.linalg.inv(X.T @ X)
 
 
-def _fix_from_lines(e: NDArray[np.float64], c: NDArray[np.float64], am: float, bm: float) -> NDArray[np.float64]:
-    """(x along the wall, distance to the wall, yaw) from the wall line b = e0 + e1 (a − am) and the left side
-    wall line a = c0 + c1 (b − bm), both in the laser frame."""
+def _corner(e: NDArray[np.float64], c: NDArray[np.float64], am: float, bm: float) -> NDArray[np.float64]:
+    """(a, b) where the reference line b = e0 + e1 (a − am) meets a side wall line a = c0 + c1 (b − bm)."""
     e0, e1 = e[0] - e[1] * am, e[1]  # b = e0 + e1 a
     c0, c1 = c[0] - c[1] * bm, c[1]  # a = c0 + c1 b
     a_corner = (c0 + c1 * e0) / (1.0 - c1 * e1)
-    b_corner = e0 + e1 * a_corner
+    return np.array([a_corner, e0 + e1 * a_corner])
+
+
+def _fix_from_lines(e: NDArray[np.float64], c: NDArray[np.float64], am: float, bm: float) -> NDArray[np.float64]:
+    """(x along the wall, distance to the wall, yaw) from the wall line b = e0 + e1 (a − am) and the left side
+    wall line a = c0 + c1 (b − bm), both in the laser frame."""
+    a_corner, b_corner = _corner(e, c, am, bm)
+    e0, e1 = e[0] - e[1] * am, e[1]
     norm = math.hypot(1.0, e1)
     x = -(a_corner + e1 * b_corner) / norm  # origin's foot minus corner, along the wall direction (1, e1)/norm
     return np.array([x, -e0 / norm, -math.atan(e1)])
 
 
-def measure_fix(angles: NDArray[np.float64], ranges: NDArray[np.float64], side_margin_m: float,
-                seed: int = 0, what: str = "scanned wall") -> dict[str, float]:
-    """One scan's fix: dict x, dist, angle (m, m, rad) and their 1σ x_sigma, dist_sigma, angle_sigma. x is in
-    wall coordinates: the distance along the reference surface from the left side wall minus side_margin_m;
-    dist the distance to the reference surface, angle the laser's turn against it. Raises InputError when
-    the reference surface (`what`) or the left side wall cannot be found."""
+def _points(angles: NDArray[np.float64], ranges: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(n, 2) laser-frame points (a, b) of the finite returns."""
     ok = np.isfinite(ranges)
-    p = np.column_stack([ranges[ok] * np.cos(angles[ok]), ranges[ok] * np.sin(angles[ok])])
-    rng = np.random.default_rng(seed)
+    return np.column_stack([ranges[ok] * np.cos(angles[ok]), ranges[ok] * np.sin(angles[ok])])
+
+
+@dataclass(frozen=True)
+class _Lines:
+    """A scan's reference surface b = e0 + e1 (a − am) and left side wall a = c0 + c1 (b − bm) (laser frame),
+    with their fits' (2, 2) covariances and inlier masks over the scan's points."""
+
+    e: NDArray[np.float64]
+    am: float
+    cov_e: NDArray[np.float64]
+    c: NDArray[np.float64]
+    bm: float
+    cov_c: NDArray[np.float64]
+    wall_in: NDArray[np.bool_]
+    side_in: NDArray[np.bool_]
+
+
+def _reference_and_left(p: NDArray[np.float64], rng: np.random.Generator, what: str) -> _Lines:
+    """The reference surface behind the laser (b < 0) and the left side wall in front of it (a < 0)."""
     behind = p[:, 1] < 0  # the scanned wall lies behind the laser (b < 0)
     wall_in = np.zeros(len(p), bool)
     wall_in[behind] = _ransac_line(p[behind], np.array([1.0, 0.0]), rng)
@@ -176,22 +197,82 @@ def measure_fix(angles: NDArray[np.float64], ranges: NDArray[np.float64], side_m
     side_in = np.zeros(len(p), bool)
     side_in[left] = _ransac_line(p[left], np.array([0.0, 1.0]), rng)
     c0, c1, bm, cov_c = _fit_line(p, side_in, swap=True, what="left side wall")
-    params = np.array([e0, e1, c0, c1])
-    cov = np.zeros((4, 4))
-    cov[:2, :2], cov[2:, 2:] = cov_e, cov_c
+    return _Lines(np.array([e0, e1]), am, cov_e, np.array([c0, c1]), bm, cov_c, wall_in, side_in)
 
-    def f(q: NDArray[np.float64]) -> NDArray[np.float64]:
-        return _fix_from_lines(q[:2], q[2:], am, bm)
 
+def _propagate(f: Callable[[NDArray[np.float64]], NDArray[np.float64]], params: NDArray[np.float64],
+               cov: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """f(params) and its 1σ by central differences, cov the (k, k) covariance of params."""
     value = f(params)
-    J = np.empty((3, 4))
-    for k in range(4):
+    J = np.empty((len(value), len(params)))
+    for k in range(len(params)):
         h = 1e-6 * max(1.0, abs(params[k]))
-        dq = np.zeros(4)
+        dq = np.zeros(len(params))
         dq[k] = h
         J[:, k] = (f(params + dq) - f(params - dq)) / (2 * h)
-    sig = np.sqrt(np.diag(J @ cov @ J.T))
+    return value, np.sqrt(np.diag(J @ cov @ J.T))
+
+
+def measure_fix(angles: NDArray[np.float64], ranges: NDArray[np.float64], side_margin_m: float,
+                seed: int = 0, what: str = "scanned wall") -> dict[str, float]:
+    """One scan's fix: dict x, dist, angle (m, m, rad) and their 1σ x_sigma, dist_sigma, angle_sigma. x is in
+    wall coordinates: the distance along the reference surface from the left side wall minus side_margin_m;
+    dist the distance to the reference surface, angle the laser's turn against it. Raises InputError when
+    the reference surface (`what`) or the left side wall cannot be found."""
+    lines = _reference_and_left(_points(angles, ranges), np.random.default_rng(seed), what)
+    params = np.concatenate([lines.e, lines.c])
+    cov = np.zeros((4, 4))
+    cov[:2, :2], cov[2:, 2:] = lines.cov_e, lines.cov_c
+    value, sig = _propagate(lambda q: _fix_from_lines(q[:2], q[2:], lines.am, lines.bm), params, cov)
     return dict(zip(_LINE_KEYS, (value[0] - side_margin_m, sig[0], value[1], sig[1], value[2], sig[2]), strict=True))
+
+
+def measure_room(angles: NDArray[np.float64], ranges: NDArray[np.float64], seed: int = 0,
+                 what: str = "scanned wall") -> dict[str, float]:
+    """What one scan sees of the room's size: `width` (m), the distance along the reference surface from the
+    left side wall to the right one (their corners with it), and `far` (m), the distance from the reference
+    surface to the opposite one (the back wall, or the ceiling), each with its 1σ (`width_sigma`,
+    `far_sigma`) from the line fits; NaN where that wall is out of view. Raises InputError as measure_fix."""
+    p = _points(angles, ranges)
+    rng = np.random.default_rng([seed, 7])
+    lines = _reference_and_left(p, rng, what)
+    e0, e1 = lines.e
+    free = ~lines.wall_in & ~lines.side_in & (p[:, 1] > e0 + e1 * (p[:, 0] - lines.am) + LINE_INLIER_M)
+    out = {"width": math.nan, "width_sigma": math.nan, "far": math.nan, "far_sigma": math.nan}
+    right = free & (p[:, 0] > 0)
+    right_in = np.zeros(len(p), bool)
+    right_in[right] = _ransac_line(p[right], np.array([0.0, 1.0]), rng)
+    if right_in.sum() >= LINE_MIN_POINTS:
+        r0, r1, rm, cov_r = _fit_line(p, right_in, swap=True, what="right side wall")
+        params = np.concatenate([lines.e, lines.c, [r0, r1]])
+        cov = np.zeros((6, 6))
+        cov[:2, :2], cov[2:4, 2:4], cov[4:, 4:] = lines.cov_e, lines.cov_c, cov_r
+
+        def width(q: NDArray[np.float64]) -> NDArray[np.float64]:
+            corners = [_corner(q[:2], side, lines.am, bm) for side, bm in ((q[2:4], lines.bm), (q[4:], rm))]
+            return np.array([float(np.linalg.norm(corners[1] - corners[0]))])
+
+        value, sig = _propagate(width, params, cov)
+        out["width"], out["width_sigma"] = float(value[0]), float(sig[0])
+        free &= ~right_in
+    far = free & (p[:, 1] > 0)
+    far_in = np.zeros(len(p), bool)
+    far_in[far] = _ransac_line(p[far], np.array([1.0, 0.0]), rng)
+    if far_in.sum() >= LINE_MIN_POINTS:
+        f0, f1, fm, cov_f = _fit_line(p, far_in, swap=False, what="opposite wall")
+        params = np.concatenate([lines.e, [f0, f1]])
+        cov = np.zeros((4, 4))
+        cov[:2, :2], cov[2:, 2:] = lines.cov_e, cov_f
+
+        def distance(q: NDArray[np.float64]) -> NDArray[np.float64]:
+            # the opposite line's point above the laser, off the reference line (both nearly parallel)
+            b_far = q[2] + q[3] * (0.0 - fm)
+            b_ref = q[0] + q[1] * (0.0 - lines.am)
+            return np.array([(b_far - b_ref) / math.hypot(1.0, q[1])])
+
+        value, sig = _propagate(distance, params, cov)
+        out["far"], out["far_sigma"] = float(value[0]), float(sig[0])
+    return out
 
 
 HEADS: tuple[str, ...] = ("H", "V")  # the horizontal laser (fix against the wall), the vertical one (the floor)
@@ -254,3 +335,27 @@ def simulate_fix(pose: tuple[float, float, float], wall_width_m: float, rng: np.
     horizontal = head_scan("H", pose, alignment, wall_width_m, cfg, rng)
     vertical = head_scan("V", pose, alignment, wall_width_m, cfg, rng)
     return fix_from_scans(horizontal, vertical, cfg, int(rng.integers(0, 2**30))), alignment
+
+
+ROOM_KEYS: tuple[str, ...] = ("room_width_m", "room_width_sigma_m", "room_depth_m", "room_depth_sigma_m",
+                              "room_height_m", "room_height_sigma_m")
+
+
+def room_from_scans(horizontal: Scan, vertical: Scan, seed: int = 0) -> dict[str, float] | None:
+    """The room's size as one alignment's two laser turns see it (dict of ROOM_KEYS, NaN: out of view): width
+    between the side walls (both heads, inverse-variance mean), depth from the scanned wall to the back wall
+    (horizontal head), height from the floor to the ceiling (vertical head); seed: their RANSAC's. None when a
+    head cannot see its reference surface or the left side wall (the fix then fails too)."""
+    try:
+        h = measure_room(*horizontal, 2 * seed, "scanned wall")
+        v = measure_room(*vertical, 2 * seed + 1, "floor")
+    except InputError:
+        return None
+    widths = [(m["width"], m["width_sigma"]) for m in (h, v) if math.isfinite(m["width"])]
+    width, width_sigma = math.nan, math.nan
+    if widths:
+        w = np.array([s for _, s in widths]) ** -2.0
+        width = float(w @ [x for x, _ in widths] / w.sum())
+        width_sigma = float(w.sum() ** -0.5)
+    return dict(zip(ROOM_KEYS, (width, width_sigma, h["far"], h["far_sigma"], v["far"], v["far_sigma"]),
+                    strict=True))

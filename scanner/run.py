@@ -89,6 +89,8 @@ class ScanResult:
     measured_passes: int = 0  # passes measured in this run (the rest came from the log)
     plan_report: list[dict[str, Any]] = field(default_factory=list)  # the planner's traced objects, if it keeps them
     plan_priors: list[str] = field(default_factory=list)  # what ordered the adaptive plan's passes (scanner.priors)
+    rooms: list[dict[str, float]] = field(default_factory=list)  # each frame's look at the room (scanner.laser
+    #                                                               room_from_scans), resumed frames' looked again
 
 
 ProgressFn = Callable[[float, float, int], None]  # (scan time so far s, estimated total s, passes done)
@@ -139,6 +141,7 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
     uv_now = np.zeros(2)
     all_samples: list[Samples] = []
     frame_rows: list[dict[str, Any]] = []
+    rooms: list[dict[str, float]] = []
     measured = 0
     previous: FrameTarget | None = None
     for target in targets:
@@ -153,6 +156,7 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
             t = float(row["time_s"])
             fresh = robot.go_to(target)  # the robot still has to be there for the remaining passes
             report.true = fresh.true if report.true is None else report.true
+            report.room = fresh.room
         else:
             report = robot.go_to(target)
             row = {"frame_id": target.frame_id, "time_s": t, "cmd_x_m": report.commanded[0],
@@ -166,6 +170,8 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
             if log is not None:
                 log.append_frame(row)
         frame_rows.append(row)
+        if report.room is not None:
+            rooms.append(report.room)
         backend.place_robot(report)
         uv_now = np.zeros(2)  # the drives home at every frame
         localise = getattr(planner, "localise", None)
@@ -214,7 +220,7 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
         merged["seq"] = np.arange(len(merged["time_s"]))
     priors = planner.priors_lines() if isinstance(planner, AdaptivePlanner) else []
     return ScanResult(merged, t, pass_id, len(targets), frame_rows, measured, list(getattr(planner, "report", [])),
-                      priors)
+                      priors, rooms)
 
 
 def _measure(backend: Backend, pass_id: int, spec: PassSpec, report: FrameReport, t_start: float,

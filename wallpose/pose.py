@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
-from geometry.poses import invert, pose_from_vector, transform_points
+from geometry.poses import invert, make_pose, pose_from_vector, transform_points
 from wallpose import limits
 from wallpose.edges import CameraImage, EdgeObservation, Projector, find_wall_edges, project_undistorted
 from wallpose.estimate import PlaneEstimate
@@ -62,6 +62,27 @@ class RoomMap:
 
     T_room_from_walls: list[NDArray[np.float64]]
     sizes_m: list[tuple[float, float]]
+
+    @classmethod
+    def from_floor_polygon(cls, corners_m: NDArray[np.float64], height_m: float) -> RoomMap:
+        """The walls of a room with this floor polygon (k, 2) (room frame, clockwise seen from above) and height."""
+        frames = wall_frames(corners_m)
+        return cls([T for T, _ in frames], [(width, float(height_m)) for _, width in frames])
+
+
+def wall_frames(corners_m: NDArray[np.float64]) -> list[tuple[NDArray[np.float64], float]]:
+    """(T_room_from_wall, width m) of each wall of a floor polygon (k, 2) in clockwise order seen from above
+    (room frame: z up, floor z = 0): wall i runs from corner i to corner i + 1, its frame's origin at corner i on
+    the floor, x along the wall, y up, z into the room."""
+    corners = np.asarray(corners_m, dtype=np.float64).reshape(-1, 2)
+    out = []
+    for i in range(len(corners)):
+        d = corners[(i + 1) % len(corners)] - corners[i]
+        width = float(np.linalg.norm(d))
+        x = np.array([d[0], d[1], 0.0]) / width
+        z = np.array([d[1], -d[0], 0.0]) / width  # into the room for a clockwise polygon
+        out.append((make_pose(np.column_stack([x, [0.0, 0.0, 1.0], z]), [corners[i, 0], corners[i, 1], 0.0]), width))
+    return out
 
 
 def _plane_whitener(plane: PlaneEstimate) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

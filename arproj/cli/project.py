@@ -4,6 +4,7 @@
     arproj project --truth scanner/walls/demo_brick_wall.yaml --sim --follow '1.0,1.0;1.3,1.1;1.8,1.2'
     arproj project --map wall.glb --rig RIG --head /dev/ttyUSB0 --left 0 --right 1 --wall-prior prior.yaml \
         --window --screen 1
+    arproj project --sim --site site.yaml --wall small_test_wall [--head URL]   # found again from the site file
 """
 
 from __future__ import annotations
@@ -47,7 +48,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         sim: bool = typer.Option(False, "--sim", help="Run on the simulated site (head simulator over "
                                  "socket://, simulated cameras); no hardware."),
         seed: int = typer.Option(0, "--seed", help="Seed of the simulated site."),
-        wall_index: int = typer.Option(0, "--wall", help="Which wall of the room the map belongs to."),
+        wall_key: str = typer.Option("0", "--wall", help="Which wall the map belongs to: with --site its key in "
+                                     "the site file, else the index of the simulated room's wall."),
         distance: float = typer.Option(2.5, "--distance", help="--sim: robot's distance to the wall, metres."),
         incidence: float = typer.Option(0.0, "--incidence", help="--sim: robot's angle to the wall, degrees."),
         aim: str = typer.Option(None, "--aim", help="Wall point X,Y (metres) to centre the image on."),
@@ -63,6 +65,9 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         right: str = typer.Option("1", "--right", help="Right camera: index, file or URL (hardware)."),
         wall_prior: Path = typer.Option(None, "--wall-prior", help="Hardware: YAML with T_wall_from_robot "
                                         "(in-plane position of the wall frame)."),
+        site: Path = typer.Option(None, "--site", help="Site file from `arproj scan` (site.yaml): find wall "
+                                  "--wall KEY again by the 2-D laser in the room the scan saw (with --sim: the "
+                                  "simulated scanning site's room); its map folder unless --map/--truth."),
         head_fault: str = typer.Option(None, "--head-fault", help="--sim: inject a head fault: dead, "
                                        "slip:PAN,TILT (degrees) or flaky."),
         interactive: bool = typer.Option(False, "--interactive", help="After the first cycle, read commands "
@@ -73,13 +78,21 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         """Project the in-wall map onto the wall, pre-warped for the beamer, with a safety gate."""
         from arproj.run.project import SessionOptions, run_session
 
+        wall_index = 0
+        if site is None:
+            try:
+                wall_index = int(wall_key)
+            except ValueError:
+                raise InputError(f"--wall {wall_key!r}: without --site the wall is the simulated room's index",
+                                 "e.g. --wall 0, or pass --site site.yaml --wall KEY") from None
         options = SessionOptions(
             map_path=map_path, objects=objects, truth=truth, rig_dir=rig_dir, sim=sim, seed=seed,
             wall_index=wall_index, distance=distance, incidence=incidence,
             aim=_point(aim, "--aim") if aim else None, drill=_point(drill, "--drill") if drill else None,
             follow=_points(follow, "--follow") if follow else [], cycles=cycles, output=output, window=window,
             screen=screen, head_url=head_url, left=left, right=right, wall_prior=wall_prior,
-            head_fault=head_fault, commands=_stdin_lines() if interactive else None)
+            head_fault=head_fault, commands=_stdin_lines() if interactive else None, site=site,
+            site_key=wall_key if site is not None else None)
         result = run_session(options, say=lambda text: err_console.print(text, highlight=False))
         if as_json:
             print(json.dumps(result, indent=2))

@@ -14,6 +14,7 @@ if TYPE_CHECKING:
     from arproj.run.scan import DeviceUrls, ScanSettings
     from scanner.log import ScanLog
     from scanner.plan import FrameTarget
+    from scanner.run import ScanResult
     from scanner.wall import Wall
 
 
@@ -37,8 +38,8 @@ def _ask_operator(frame: FrameTarget) -> None:
 
 
 def _scan_into(scan_log: ScanLog, the_wall: Wall, settings: ScanSettings, fast: bool, faults: float,
-               urls: DeviceUrls | None, virtual_clock: bool, device_timeout: float) -> None:
-    """Scan into an open log (the simulated site, or the devices at urls) and print what was done."""
+               urls: DeviceUrls | None, virtual_clock: bool, device_timeout: float) -> ScanResult:
+    """Scan into an open log (the simulated site, or the devices at urls), print what was done, return it."""
     from arproj.console import console, progress_bar
     from arproj.run.scan import scan_on_devices, scan_simulated
 
@@ -78,6 +79,7 @@ def _scan_into(scan_log: ScanLog, the_wall: Wall, settings: ScanSettings, fast: 
             console.print(f"  frame {row['frame_id']} object {row['object']} ({row['channel']}): "
                           f"{row['length_m']:.2f} m traced, {100 * row['measured_share']:.0f} % measured "
                           f"by following passes; ends: {', '.join(row['ends'])}{first}")
+    return result
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
@@ -122,6 +124,14 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         fast: bool = typer.Option(False, "--fast", help="Simulation: evaluate the site in-process instead of "
                                   "through the serial simulators (identical samples, faster)."),
         overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing log at --log."),
+        site: Path = typer.Option(None, "--site", help="Site file to add this wall to (arproj-site/1 YAML): "
+                                  "where the wall is in the room, as the laser saw it, for `arproj project "
+                                  "--site`. Default: site.yaml beside the log."),
+        no_site: bool = typer.Option(False, "--no-site", help="Write no site file."),
+        site_key: str = typer.Option(None, "--site-key", help="The wall's key in the site file (default: the "
+                                     "wall file's name without .yaml); an entry of that key is replaced."),
+        site_map: Path = typer.Option(None, "--site-map", help="The map folder the site file names (default: "
+                                      "map/ beside the site file, where `arproj map LOG --out DIR` writes)."),
     ) -> None:
         """Scan a wall: frames, passes and every sample go to a SQLite log, batch by batch (kill -9 safe)."""
         from scanner.log import WriterLock
@@ -148,6 +158,19 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             if not 0.01 <= device_timeout <= 60:
                 raise InputError(f"--device-timeout = {device_timeout:g} s: must lie between 0.01 and 60")
             urls = DeviceUrls(drives, scanner_url, laser, base)
+        if site is not None and no_site:
+            raise InputError("give --site FILE or --no-site, not both")
+        if site is not None and urls is not None and urls.laser is None:
+            raise InputError(f"--site {site}: the site file needs the 2-D laser's view of the room",
+                             "give --laser URL, or --no-site")
+        # beside the log by default: it names the log and the map by relative paths, and a wall scanned without
+        # one cannot be projected on hardware later; a scan without the laser (base only) writes none
+        site_path = None if no_site or (site is None and urls is not None and urls.laser is None) else \
+            site if site is not None else Path(log or resume).parent / "site.yaml"
+        if site_path is not None:
+            from arproj.site_file import check_writable
+
+            check_writable(site_path)  # before the scan: another kind of file there is refused, kept as it is
         if resume is not None:
             if log is not None:
                 raise InputError("give either --resume LOG or --log LOG, not both")
@@ -184,7 +207,15 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             scan_log = new_scan_log(log, the_wall, str(wall), settings, overwrite=overwrite, simulated=urls is None)
             console.print(f"{log}: {'replaced by a new' if replacing else 'new'} scan log", highlight=False)
         with scan_log:
-            _scan_into(scan_log, the_wall, settings, fast, faults, urls, virtual_clock, device_timeout)
+            result = _scan_into(scan_log, the_wall, settings, fast, faults, urls, virtual_clock, device_timeout)
+            if site_path is not None:
+                from arproj.run.scan import write_site
+
+                key = site_key or Path(the_wall.source or the_wall.name).stem  # a shipped wall: its name
+                replaced = write_site(site_path, key, the_wall, result, Path(scan_log.path),
+                                      site_map.resolve() if site_map is not None else None)
+                console.print(f"{site_path}: wall {key!r} {'replaced' if replaced else 'written'} (the room as "
+                              f"{len(result.rooms)} frames' lasers saw it)", highlight=False)
 
     @app.command("scan-plot")
     def scan_plot(

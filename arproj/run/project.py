@@ -6,17 +6,22 @@ import itertools
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from arproj.session import registration
 from arproj.session.output import BeamerWindow, FileOutput, MemoryOutput
 from arproj.session.wallmap import WallMap, load_wall_map, wall_map_from_wall_file
+from arproj.site_file import SiteWall, read_site_wall, simulated_room
 from devices.errors import DeviceError
 from devices.pelco_d import PanTiltHead
 from devices.sim import HeadFaults
 from geometry.errors import InputError
+from geometry.poses import invert
 from geometry.rig import Rig
+from wallpose.pose import wall_frames
 
 
 @dataclass
@@ -41,6 +46,8 @@ class SessionOptions:
     left: str = "0"
     right: str = "1"
     wall_prior: Path | None = None
+    site: Path | None = None          # a site file (arproj-site/1): find wall `site_key` again by the laser
+    site_key: str | None = None
     head_fault: str | None = None
     commands: Iterable[str] | None = None  # interactive: lines such as "aim 1.2,1.1", "drill 1.3,1.0", "update"
 
@@ -65,12 +72,45 @@ class MultiOutput:
             out.close()
 
 
-def load_map(options: SessionOptions) -> WallMap:
+def load_map(options: SessionOptions, site_wall: SiteWall | None = None) -> WallMap:
     if options.map_path is not None:
         return load_wall_map(options.map_path, options.objects)
     if options.truth is not None:
         return wall_map_from_wall_file(options.truth)
+    if site_wall is not None:
+        glb = site_wall.map_dir / "wall.glb"
+        if not glb.is_file():
+            raise InputError(f"--site: wall {site_wall.key!r}'s map {glb} does not exist",
+                             f"map the scan first: `arproj map {site_wall.scan_log} --out {site_wall.map_dir}`, "
+                             "or pass --map")
+        return load_wall_map(glb, options.objects)
     raise InputError("no map given", "pass --map WALL.glb (from `arproj map`) or --truth WALL.yaml")
+
+
+def open_site_wall(options: SessionOptions) -> SiteWall | None:
+    """The site file's wall the session projects on (None without --site)."""
+    if options.site is None:
+        return None
+    if options.wall_prior is not None:
+        raise InputError("give --site FILE or --wall-prior FILE, not both")
+    if not options.site_key:
+        raise InputError(f"--site {options.site}: say which wall with --wall KEY")
+    return read_site_wall(options.site, options.site_key)
+
+
+def simulated_site_for(site_wall: SiteWall, options: SessionOptions, ctx: object) -> tuple[Any, NDArray[np.float64]]:
+    """The simulated projection site in the scanning simulator's true room around the site file's wall (what
+    its simulated scan measured), the robot aimed at --aim (default: the wall's centre); and the wall's true
+    T_room_from_wall there."""
+    from arproj.sim.site import Site
+
+    corners, height, T_room_from_map = simulated_room(site_wall.width_m, site_wall.height_m)
+    offset = invert(wall_frames(corners)[0][0]) @ T_room_from_map  # the wall's corner on room wall 0
+    aim = options.aim or (site_wall.width_m / 2, site_wall.height_m / 2)
+    site = Site.build(seed=options.seed, ctx=ctx, room={"corners_m": corners.tolist(), "height_m": height},
+                      robot={"distance_m": options.distance, "incidence_deg": options.incidence, "wall": 0,
+                             "along_m": float(offset[0, 3] + aim[0]), "aim_height_m": float(offset[1, 3] + aim[1])})
+    return site, T_room_from_map
 
 
 def _head_faults(spec: str | None) -> HeadFaults:
@@ -103,7 +143,8 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
     from arproj.session.robot_io import HardwareRobot, SimulatedRobot, nominal_rig
     from arproj.session.session import ProjectionSession
 
-    wall_map = load_map(options)
+    site_wall = open_site_wall(options)
+    wall_map = load_map(options, site_wall)
     outputs: list = []
     memory = MemoryOutput()
     outputs.append(memory)
@@ -128,27 +169,44 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
             from render.gl import create_context
 
             ctx = create_context()
-            site = Site.build(seed=options.seed, ctx=ctx, robot={"distance_m": options.distance,
-                                                        "incidence_deg": options.incidence,
-                                                        "wall": options.wall_index})
+            T_room_from_map = None
+            if site_wall is not None:  # the scanned site's room, found again from the file (truth kept apart)
+                site, T_room_from_map = simulated_site_for(site_wall, options, ctx)
+            else:
+                site = Site.build(seed=options.seed, ctx=ctx, robot={"distance_m": options.distance,
+                                                            "incidence_deg": options.incidence,
+                                                            "wall": options.wall_index})
             if rig is None:
                 rig = nominal_rig(site)
                 say("[yellow]note:[/] no --rig given: using the simulated robot's design values (uncalibrated); "
                     "run `arproj calibrate --sim --out RIG` and pass --rig RIG for a calibrated rig")
             check_rig_matches(rig, {"camera_left": site.camera_left, "camera_right": site.camera_right,
                                     "projector": site.projector})
-            robot = SimulatedRobot.on_site(site, options.wall_index, multi, seed=options.seed,
-                                           head_faults=_head_faults(options.head_fault), timeout_s=0.1)
+            if options.head_url is not None and options.head_fault:
+                raise InputError("--head-fault injects faults into the in-process head: not with --head URL",
+                                 "start `arproj devices serve --faults P` for a faulty head at a URL")
+            robot = SimulatedRobot.on_site(site, 0 if site_wall is not None else options.wall_index, multi,
+                                           seed=options.seed, head_faults=_head_faults(options.head_fault),
+                                           timeout_s=0.1 if options.head_url is None else 0.5,
+                                           head_url=options.head_url, T_room_from_map=T_room_from_map,
+                                           site_wall=site_wall)
         else:
             if rig is None:
                 raise InputError("no rig given", "pass --rig RIG_DIR (from `arproj calibrate`), or --sim")
+            if site_wall is not None:
+                raise InputError(f"--site {options.site}: on hardware the projection robot's 2-D laser is not "
+                                 "driven by `arproj project` yet, so the wall cannot be found again from the site "
+                                 "file", "pass --wall-prior FILE (T_wall_from_robot), or --sim")
             if options.wall_prior is None:
-                raise InputError("hardware sessions need --wall-prior FILE (T_wall_from_robot) until the "
-                                 "wall-pose package measures the in-plane position itself")
+                raise InputError("hardware sessions need --wall-prior FILE (T_wall_from_robot), or --site FILE "
+                                 "--wall KEY on the simulated site (--sim)")
             head = PanTiltHead(options.head_url) if options.head_url else None
             robot = HardwareRobot(options.left, options.right, rig.intrinsics["camera_left"],
                                   rig.intrinsics["camera_right"], multi, head, options.wall_prior)
-        return _run(ProjectionSession, rig, wall_map, robot, options, memory, say, ctx)
+        result = _run(ProjectionSession, rig, wall_map, robot, options, memory, say, ctx)
+        if site is not None and isinstance(robot, SimulatedRobot) and result.get("registration"):
+            result["registration"]["truth"] = _registration_truth(site, robot, result["registration"], rig)
+        return result
     finally:
         if robot is not None:
             robot.close()
@@ -201,6 +259,13 @@ def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options:
             say(f"cycle {k}: " + ("map shown" if decision.show_map else "WARNING: " + "; ".join(decision.reasons)))
         if options.commands is not None:
             _interactive(session, options.commands, result, say)
+        reg = session.registration
+        if reg is not None:
+            result["registration"] = {"T_wall_from_projector": reg.T_wall_from_projector.tolist(),
+                                      "T_wall_from_robot": reg.T_wall_from_robot.tolist(),
+                                      "sigma_mm": round(reg.sigma_m * 1000, 4), "source": reg.prior_source,
+                                      "aim_xy_m": registration.aim_point_on_wall(reg.T_wall_from_projector,
+                                                                                 session.projector_intr)[:2].tolist()}
         result["log"] = list(session.log)
     return result
 
@@ -248,6 +313,25 @@ def _interactive(session: object, commands: Iterable[str], result: dict, say: Ca
             say(f"could not read {line.strip()!r}: points are X,Y in metres, e.g. aim 1.2,1.1")
         except (InputError, DeviceError) as err:
             say(f"[yellow]warning:[/] {err}")
+
+
+def _registration_truth(site: Any, robot: Any, reg: dict, rig: Rig) -> dict:
+    """The simulated site's truth for the session's registration: where the map's wall frame really has the
+    projector, and how far (mm) the estimate puts the beamer's centre pixel from where it really lands."""
+    from geometry.poses import rotation_angle_deg
+
+    T_true = invert(robot.T_room_from_map) @ site.T_room_from("projector")
+    T_est = np.asarray(reg["T_wall_from_projector"], dtype=np.float64)
+    projector = rig.intrinsics["projector"]
+    centre = registration.aim_point_on_wall(T_est, projector)[:2]
+    landed = registration.aim_point_on_wall(T_true, projector)[:2]
+    T_wall_from_robot = invert(robot.T_room_from_map) @ site.T_room_from_robot
+    T_est_robot = np.asarray(reg["T_wall_from_robot"], dtype=np.float64)
+    return {"T_wall_from_projector": T_true.tolist(), "T_wall_from_robot": T_wall_from_robot.tolist(),
+            "robot_position_error_mm": float(1000 * np.linalg.norm(T_est_robot[:3, 3] - T_wall_from_robot[:3, 3])),
+            "projector_position_error_mm": float(1000 * np.linalg.norm(T_est[:3, 3] - T_true[:3, 3])),
+            "projector_rotation_error_deg": rotation_angle_deg(T_est[:3, :3], T_true[:3, :3]),
+            "aim_error_mm": float(1000 * np.linalg.norm(centre - landed))}
 
 
 def _inside_image(session: object, xy: tuple[float, float], margin: float = 0.2) -> bool:

@@ -130,6 +130,18 @@ def scan_on_devices(wall: Wall, settings: ScanSettings, urls: DeviceUrls, log: S
     return SimulatedScan(result, 0, backend.faults_recovered + robot.faults_recovered)
 
 
+def write_site(path: Path, key: str, wall: Wall, result: ScanResult, scan_log: Path,
+               map_dir: Path | None = None) -> bool:
+    """Add the scanned wall to the site file at `path` (arproj.site_file): the room its frames' lasers saw, the
+    wall's place in it, the map folder (default `map` beside the site file) and the log. Returns True when an
+    entry of that key was replaced."""
+    from arproj.site_file import site_wall_from_scan, write_site_wall
+
+    site_wall = site_wall_from_scan(key, wall, result.rooms, result.frames, LaserConfig(),
+                                    map_dir if map_dir is not None else path.parent / "map", scan_log)
+    return write_site_wall(path, site_wall)
+
+
 def scan_and_map(wall: Wall, plan: str, seed: int, options: dict[str, Any] | None = None
                  ) -> tuple[ScanResult, MapResult]:
     """Scan `wall` with `plan` and its `options` (in-process site, no log) and map it as `arproj map` does."""

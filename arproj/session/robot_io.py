@@ -8,6 +8,7 @@ beamer window, a head at a serial URL).
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
@@ -17,12 +18,15 @@ import yaml
 from numpy.typing import NDArray
 
 from arproj.session.output import FrameOutput
+from arproj.session.relocalise import START_SIGMA_DEG, START_SIGMA_M, fix_in_site
+from arproj.site_file import SiteWall
 from devices.pelco_d import PanTiltHead
 from devices.sim import HeadFaults, HeadSimulator
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert
 from geometry.rig import Rig
+from wallpose.pose import RoomMap
 
 if TYPE_CHECKING:
     from arproj.sim.protocols import RobotSite
@@ -51,6 +55,45 @@ class RobotIO(Protocol):
 TRUTH_PRIOR = "sim truth (in-plane)"  # SimulatedRobot.wall_prior's source with prior="truth"
 
 
+@dataclass
+class PoseInputs:
+    """What the full wall-pose estimate fuses with the plane besides the laser scan: the room's walls, which of
+    them holds the map, the robot's start pose in the room and its σ (wallpose.pose.estimate_wall_pose), the
+    map's wall frame in the room (None: the room wall's own frame) and a σ to add in the wall's plane (how well
+    that frame is known in the room)."""
+
+    room: RoomMap
+    wall_index: int
+    localized_T_room_from_robot: NDArray[np.float64]
+    sigma_m: float
+    sigma_deg: float
+    T_room_from_map: NDArray[np.float64] | None = None
+    extra_sigma_m: float = 0.0
+    source: str = "localization"
+
+
+def site_pose_inputs(site_wall: SiteWall, scan_points: NDArray[np.float64], laser_origin: NDArray[np.float64],
+                     normal_robot: NDArray[np.float64] | None) -> PoseInputs:
+    """The full estimate's inputs from a site file: its room, the start pose from the laser's fix in it."""
+    fix = fix_in_site(scan_points, laser_origin, site_wall, normal_robot)
+    return PoseInputs(site_wall.room_map(), site_wall.wall_index, fix.T_room_from_robot, START_SIGMA_M,
+                      START_SIGMA_DEG, site_wall.T_room_from_wall,
+                      float(np.hypot(site_wall.sigma_along_m, site_wall.sigma_height_m)),
+                      f"laser fix in the site's room ({' and '.join(fix.sides)} side wall)")
+
+
+def site_wall_prior(site_wall: SiteWall, scan_points: NDArray[np.float64] | None,
+                    laser_origin: NDArray[np.float64]) -> tuple[NDArray[np.float64], float, str]:
+    """wall_prior() from a site file before the pattern is seen: the laser's fix alone (InputError without a
+    laser scan or when it sees no side wall)."""
+    if scan_points is None:
+        raise InputError(f"--site: finding wall {site_wall.key!r} again needs the robot's 2-D laser",
+                         "give the laser (--laser URL), or --wall-prior FILE")
+    fix = fix_in_site(scan_points, laser_origin, site_wall)
+    return fix.T_wall_from_robot, float(np.hypot(fix.sigma_along_m, site_wall.sigma_along_m)), \
+        "laser fix in the site's room"
+
+
 class SimulatedRobot:
     """The simulated site as the session's robot. The head is commanded over Pelco-D to a HeadSimulator; the
     site's head then moves to the simulator's physical angles (its own bias, noise and backlash on top).
@@ -58,10 +101,17 @@ class SimulatedRobot:
     prior: "measured" (default) estimates the full wall pose with the wall-pose package (plane + localization +
     floor + laser scan of the room); "truth" gives the in-plane part of the wall frame exactly (to isolate the
     projection from the wall pose); "localization" uses the robot's noisy localization alone.
+
+    T_room_from_map: the map's wall frame on the site (the truth; None: wall `wall_index`'s own frame, its
+    lower-left corner). site_wall: find the wall again from a site file (arproj.site_file) instead of the
+    site's truth room and the simulated localization: the laser's fix in the file's room, as on hardware.
+    head_sim None: the head is another process's (`arproj devices serve`); the site's head follows the angles
+    it reports.
     """
 
-    def __init__(self, site: RobotSite, wall_index: int, head_sim: HeadSimulator, head: PanTiltHead,
-                 output: FrameOutput | None = None, prior: str = "measured") -> None:
+    def __init__(self, site: RobotSite, wall_index: int, head_sim: HeadSimulator | None, head: PanTiltHead,
+                 output: FrameOutput | None = None, prior: str = "measured",
+                 T_room_from_map: NDArray[np.float64] | None = None, site_wall: SiteWall | None = None) -> None:
         self.site = site
         self.wall_index = int(wall_index)
         self.head_sim = head_sim
@@ -70,23 +120,38 @@ class SimulatedRobot:
         self.prior = prior
         self._synced: tuple[float, float] | None = None
         self.wall = site.walls[self.wall_index]
+        self.T_room_from_map = np.asarray(self.wall.T_room_from_wall if T_room_from_map is None else T_room_from_map,
+                                          dtype=np.float64)
+        self.site_wall = site_wall
 
     @classmethod
     def on_site(cls, site: RobotSite, wall_index: int = 0, output: FrameOutput | None = None, prior: str = "measured",
                 *, seed: int = 0, head_faults: HeadFaults | None = None, head_speed_deg_s: float | None = None,
-                timeout_s: float = 0.2, retries: int = 3, settle_timeout_s: float = 3.0) -> SimulatedRobot:
+                timeout_s: float = 0.2, retries: int = 3, settle_timeout_s: float = 3.0,
+                head_url: str | None = None, T_room_from_map: NDArray[np.float64] | None = None,
+                site_wall: SiteWall | None = None) -> SimulatedRobot:
         """The robot on `site`, its head a HeadSimulator (seeded; `head_faults` injected; `head_speed_deg_s`,
         None: the simulator's own) started at the angles the site's head is commanded to, and reached over
-        Pelco-D on socket:// with these timeouts, as a real head is."""
+        Pelco-D on socket:// with these timeouts, as a real head is; or the head at head_url (another
+        process's, e.g. `arproj devices serve`), moved to those angles first."""
+        if head_url is not None:
+            head = PanTiltHead(head_url, timeout_s=timeout_s, retries=retries, settle_timeout_s=settle_timeout_s)
+            try:
+                head.move_to(*(float(a) for a in site.head_angles_cmd_deg[:2]))
+            except BaseException:
+                head.close()
+                raise
+            return cls(site, wall_index, None, head, output, prior, T_room_from_map, site_wall)
         speed = {} if head_speed_deg_s is None else {"speed_deg_s": head_speed_deg_s}
         head_sim = HeadSimulator(faults=head_faults, seed=seed, **speed,
                                  initial_deg=tuple(float(a) for a in site.head_angles_cmd_deg[:2]))
         head = PanTiltHead(head_sim.url, timeout_s=timeout_s, retries=retries, settle_timeout_s=settle_timeout_s)
-        return cls(site, wall_index, head_sim, head, output, prior)
+        return cls(site, wall_index, head_sim, head, output, prior, T_room_from_map, site_wall)
 
     def sync_head(self) -> None:
-        """Move the site's head to where the simulated head physically is (slip included)."""
-        true = self.head_sim.true_deg()
+        """Move the site's head to where the simulated head physically is (slip included; a head of another
+        process: where it reports to be)."""
+        true = self.head_sim.true_deg() if self.head_sim is not None else self.head.position()
         if self._synced is None or not np.allclose(true, self._synced, atol=1e-9):
             self.site.set_head([true[0], true[1], 0.0])
             self._synced = true
@@ -105,19 +170,24 @@ class SimulatedRobot:
     def laser_points(self) -> NDArray[np.float64]:
         return self.site.laser_scan().points_robot()
 
-    def full_pose_inputs(self) -> tuple | None:
-        """(room map, wall index, localized T_room_from_robot, σ m, σ deg) for the wall-pose package's full
-        estimate (plane + localization + floor + laser), or None when the in-plane part comes from truth."""
+    def full_pose_inputs(self, normal_robot: NDArray[np.float64] | None = None) -> PoseInputs | None:
+        """What the wall-pose package's full estimate fuses (plane + start pose + floor + laser), or None when the
+        in-plane part comes from truth. normal_robot: the measured plane's normal (orients a site's laser fix)."""
         if self.prior != "measured":
             return None
+        if self.site_wall is not None:
+            return site_pose_inputs(self.site_wall, self.laser_points(), self.site.T_robot_from_laser[:3, 3],
+                                    normal_robot)
         from arproj.sim.wallpose_trial import room_map
 
         r = self.site.scene["robot"]
-        return (room_map(self.site), self.wall_index, self.site.localized_T_room_from_robot,
-                float(r["localization_sigma_m"]), float(r["localization_sigma_deg"]))
+        return PoseInputs(room_map(self.site), self.wall_index, self.site.localized_T_room_from_robot,
+                          float(r["localization_sigma_m"]), float(r["localization_sigma_deg"]), self.T_room_from_map)
 
     def wall_prior(self) -> tuple[NDArray[np.float64], float, str]:
-        T_wall_from_room = invert(self.wall.T_room_from_wall)
+        if self.site_wall is not None and self.prior == "measured":
+            return site_wall_prior(self.site_wall, self.laser_points(), self.site.T_robot_from_laser[:3, 3])
+        T_wall_from_room = invert(self.T_room_from_map)
         if self.prior == "truth":
             return T_wall_from_room @ self.site.T_room_from_robot, 0.0, TRUTH_PRIOR
         sigma = float(self.site.scene["robot"]["localization_sigma_m"])
@@ -125,7 +195,8 @@ class SimulatedRobot:
 
     def close(self) -> None:
         self.head.close()
-        self.head_sim.close()
+        if self.head_sim is not None:
+            self.head_sim.close()
 
 
 def open_camera(source: str, intr: Intrinsics, name: str) -> cv2.VideoCapture:
@@ -200,7 +271,7 @@ class HardwareRobot:
     def laser_points(self) -> None:
         return None
 
-    def full_pose_inputs(self) -> None:
+    def full_pose_inputs(self, normal_robot: NDArray[np.float64] | None = None) -> None:
         return None  # hardware: the in-plane part comes from the wall-prior file
 
     def wall_prior(self) -> tuple[NDArray[np.float64], float, str]:

@@ -197,17 +197,20 @@ class ProjectionSession:
         (not enough evidence) when the fusion declines."""
         T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
         prior, in_plane_sigma, _ = self.robot.wall_prior()
-        full = getattr(self.robot, "full_pose_inputs", lambda: None)()
+        full = getattr(self.robot, "full_pose_inputs", lambda normal: None)(plane.normal)
         if full is None:
             return (registration.snap_to_plane(prior, plane.normal, plane.distance), T_robot_from_projector,
                     in_plane_sigma, 0.0, None)
-        room, wall_index, localized, loc_m, loc_deg = full
-        pose = estimate_wall_pose(plane, wall_index, room, localized, T_robot_from_projector, scan, loc_m, loc_deg,
+        pose = estimate_wall_pose(plane, full.wall_index, full.room, full.localized_T_room_from_robot,
+                                  T_robot_from_projector, scan, full.sigma_m, full.sigma_deg,
                                   camera_images=None if images is None else camera_images(views, *images),
                                   projector=views.projector)
-        in_plane = float(np.hypot(pose.sigma_along_m, pose.sigma_height_m))
-        return (pose.T_wall_from_robot, T_robot_from_projector, in_plane, float(np.radians(pose.sigma_roll_deg)),
-                "wall pose (" + ", ".join(pose.sources) + ")")
+        T_wall_from_robot = pose.T_wall_from_robot if full.T_room_from_map is None else \
+            invert(full.T_room_from_map) @ pose.T_room_from_robot  # the map's frame, in the room wall's plane
+        in_plane = float(np.sqrt(pose.sigma_along_m ** 2 + pose.sigma_height_m ** 2 + full.extra_sigma_m ** 2))
+        sources = [full.source if s == "localization" else s for s in pose.sources]
+        return (T_wall_from_robot, T_robot_from_projector, in_plane, float(np.radians(pose.sigma_roll_deg)),
+                "wall pose (" + ", ".join(sources) + ")")
 
     def estimate(self) -> Registration | None:
         """Project the pattern, estimate the wall plane and the projector's pose; None (and pose_failure set)

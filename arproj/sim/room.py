@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import InputError
 from geometry.poses import invert, make_pose
+from wallpose.pose import wall_frames
 
 # Tolerances (metres) in one place.
 RAY_EPS_M = 1e-9          # hits closer than this to the ray origin are ignored
@@ -209,15 +210,7 @@ class Room:
         self.height_m = float(config["height_m"])
         self.ambient_lux = float(config["ambient_lux"])
         self.walls: list[Wall] = []
-        n = len(corners)
-        for i in range(n):
-            a, b = corners[i], corners[(i + 1) % n]
-            d = b - a
-            width = float(np.linalg.norm(d))
-            x = np.array([d[0], d[1], 0.0]) / width
-            z = np.array([d[1], -d[0], 0.0]) / width     # into the room for a clockwise polygon
-            y = np.array([0.0, 0.0, 1.0])
-            T = make_pose(np.column_stack([x, y, z]), [a[0], a[1], 0.0])
+        for i, (T, width) in enumerate(wall_frames(corners)):
             override = config["walls"].get(i, {})
             albedo = float(override.get("albedo", config["wall_albedo"]))
             kind = override.get("texture", config["wall_texture"])

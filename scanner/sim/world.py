@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from geometry.errors import InputError
-from scanner.laser import HEADS, LaserConfig, draw_alignment, fix_from_scans, simulated_head_scan
+from scanner.laser import HEADS, LaserConfig, draw_alignment, fix_from_scans, room_from_scans, simulated_head_scan
 from scanner.plan import DriveConfig, FrameTarget, frame_pose_apply, move_position
 from scanner.sensor_model import SensorConfig, SensorModel
 from scanner.wall import Wall
@@ -32,6 +32,7 @@ class FrameReport:
     cov: np.ndarray  # (3, 3): x, y (m²), phi (rad²)
     true: Pose | None
     laser: dict[str, float] | None = None  # the 2-D laser's fix (scanner.laser.LASER_KEYS), if any
+    room: dict[str, float] | None = None  # the room's size as the same laser turns saw it (scanner.laser.ROOM_KEYS)
 
 
 @dataclass(frozen=True)
@@ -77,7 +78,7 @@ class SimRobot:
     def go_to(self, frame: FrameTarget) -> FrameReport:
         commanded = (frame.x_m, frame.y_m, 0.0)  # y: the lift raises the drive frame to its band
         stop = self.stop(frame.frame_id, commanded)
-        fix = None
+        fix = room = None
         if self.wall_width_m is not None:
             scans = [simulated_head_scan(head, stop.true, stop.alignment, self.wall_width_m, self.laser, self.seed,
                                          frame.frame_id) for head in HEADS]
@@ -85,7 +86,8 @@ class SimRobot:
                 fix = fix_from_scans(scans[0], scans[1], self.laser, seed=frame.frame_id)
             except InputError:
                 fix = None  # no fix (walls not in view): the frame keeps its localization alone
-        return FrameReport(commanded, stop.estimate, stop.cov, stop.true, fix)
+            room = room_from_scans(scans[0], scans[1], seed=frame.frame_id)
+        return FrameReport(commanded, stop.estimate, stop.cov, stop.true, fix, room)
 
 
 class SimWorld:
