@@ -201,10 +201,9 @@ class SimulatedRobot:
 
 def open_camera(source: str, intr: Intrinsics, name: str) -> cv2.VideoCapture:
     """A cv2.VideoCapture for an index ("0"), a file or a URL, checked against the rig's image size."""
-    cap = cv2.VideoCapture(int(source) if source.isdigit() else source)
-    if not cap.isOpened():
-        raise InputError(f"{name}: camera {source!r} does not open",
-                         "check the index/URL and that no other program uses the camera, or pass --sim")
+    from calibration.capture import open_source
+
+    cap = open_source(source, name)
     cap.set(cv2.CAP_PROP_FRAME_WIDTH, intr.width)
     cap.set(cv2.CAP_PROP_FRAME_HEIGHT, intr.height)
     ok, image = cap.read()
