@@ -129,7 +129,8 @@ def write_report(ctx: Any) -> Path:
     total = sum(r.seconds or 0.0 for r in ctx.stages.values())
     parts.append(f"<tr><td><b>total</b></td><td></td><td class=num><b>{total:.1f}</b></td></tr></table>")
     parts.append("<p class=muted>Files: scan.db (scan log), map/ (wall.glb, objects.json, map.png, signals.png, "
-                 "objects.dxf, range_images.npz), rig/ (calibration), demo-state.json (for --resume).</p>")
+                 "objects.dxf, map_server.yaml/.pgm, range_images.npz), rig/ (calibration), demo-state.json "
+                 "(for --resume).</p>")
     parts.append("</body></html>")
     path = out / "report.html"
     path.write_text("\n".join(parts), encoding="utf-8")
