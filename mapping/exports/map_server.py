@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from geometry import provenance
 from mapping import drill
 from mapping.exports.common import ExportJob
 
@@ -46,5 +47,5 @@ def write(job: ExportJob) -> Path:
            "origin": [float(info.origin_x), float(info.origin_y), 0.0], "negate": 0,
            "occupied_thresh": OCCUPIED_THRESH, "free_thresh": FREE_THRESH}
     path = job.out_dir / FILE_NAME
-    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    path.write_text(f"# {provenance.line()}\n" + yaml.safe_dump(doc, sort_keys=False))
     return path
