@@ -28,6 +28,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
+from geometry import provenance
 from geometry.errors import InputError
 from geometry.frames import parse_pose_name
 from geometry.head import HeadModel
@@ -100,6 +101,7 @@ class Rig:
             parse_pose_name(name)
         doc = {
             "version": 1,
+            "made_by": provenance.record(),
             "intrinsics": files,
             "poses": {k: np.asarray(v, dtype=float).tolist() for k, v in self.poses.items()},
             "quality": plain(self.quality),

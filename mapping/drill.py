@@ -153,3 +153,85 @@ def check_points(points: ArrayLike, objects: list[MappedObject], coverage: Cover
                  drill_radius_m: float = DRILL_RADIUS_M) -> list[DrillVerdict]:
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     return [check_point(p, objects, coverage, bounds, registration_sigma_m, drill_radius_m) for p in pts]
+
+
+VERDICT_CODES = {SAFE: 0, KEEP_AWAY: 1, UNKNOWN: 2}
+
+
+def _disc_offsets(radius_m: float, resolution: float, lo: tuple[int, int], hi: tuple[int, int]
+                 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """(row offsets, col offsets) of the cells Coverage.cells_within counts for a disc about a cell's centre
+    whose search box spans lo..hi cells (rows, cols) about it."""
+    dr, dc = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
+    near = np.hypot(dr * resolution, dc * resolution) <= radius_m + 0.7072 * resolution
+    return dr[near], dc[near]
+
+
+def _any_within(mask: NDArray[np.bool_], dr: NDArray[np.int64], dc: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """out[r, c] = any(mask[r + dr, c + dc]) over the offsets inside the grid."""
+    h, w = mask.shape
+    out = np.zeros_like(mask)
+    for a, b in zip(dr.tolist(), dc.tolist(), strict=True):
+        src = mask[max(a, 0):h + min(a, 0), max(b, 0):w + min(b, 0)]
+        out[max(-a, 0):h + min(-a, 0), max(-b, 0):w + min(-b, 0)] |= src
+    return out
+
+
+def verdict_raster(objects: list[MappedObject], coverage: Coverage, bounds: tuple[float, float, float, float],
+                   registration_sigma_m: float = 0.0, drill_radius_m: float = DRILL_RADIUS_M) -> NDArray[np.int8]:
+    """check_point's verdict at the centre of every cell of coverage's grid, as VERDICT_CODES (height, width),
+    computed for the whole grid at once (exports such as the map_server grid); the same rules in the same order,
+    and equal to check_point cell for cell (tests/mapping/test_drill.py)."""
+    info = coverage.info
+    h, w, res = info.height, info.width, info.resolution
+    xs = info.origin_x + (np.arange(w) + 0.5) * res
+    ys = info.origin_y + (np.arange(h) + 0.5) * res
+    x0, y0, x1, y1 = bounds
+    out = np.full((h, w), VERDICT_CODES[UNKNOWN], np.int8)
+    # rules 4 and 5: the disc wholly inside the grid, covered by every safety channel, with no response in it
+    radius = drill_radius_m + BASE_SAFETY_MARGIN_M + Z95 * registration_sigma_m
+    # the search box about each centre, computed as cells_within computes it (its rounding decides whether a
+    # disc that just reaches a cell's edge counts it), so the raster equals check_point at every cell
+    c0 = np.floor((xs - radius - info.origin_x) / res).astype(np.int64)
+    c1 = np.floor((xs + radius - info.origin_x) / res).astype(np.int64)
+    r0 = np.floor((ys - radius - info.origin_y) / res).astype(np.int64)
+    r1 = np.floor((ys + radius - info.origin_y) / res).astype(np.int64)
+    col_box = np.column_stack([c0 - np.arange(w), c1 - np.arange(w)])
+    row_box = np.column_stack([r0 - np.arange(h), r1 - np.arange(h)])
+    whole = ((r0 >= 0) & (r1 < h))[:, None] & ((c0 >= 0) & (c1 < w))[None, :]
+    responded = np.zeros((h, w), bool)
+    for layer in coverage.response.values():
+        responded |= layer
+    missing = any(channel not in coverage.covered for channel in SAFETY_CHANNELS)
+    for rb in np.unique(row_box, axis=0):
+        for cb in np.unique(col_box, axis=0):
+            sel = np.all(row_box == rb, axis=1)[:, None] & np.all(col_box == cb, axis=1)[None, :] & whole
+            if missing or not sel.any():
+                continue
+            dr, dc = _disc_offsets(radius, res, (int(rb[0]), int(cb[0])), (int(rb[1]), int(cb[1])))
+            ok = sel & ~_any_within(responded, dr, dc)
+            for channel in SAFETY_CHANNELS:
+                ok &= ~_any_within(~coverage.covered[channel], dr, dc)
+            out[ok] = VERDICT_CODES[SAFE]
+    # rules 2 and 3, over each object's reach only: inferred stretches make unknown, measured ones keep away
+    keep = np.zeros((h, w), bool)
+    inferred = np.zeros((h, w), bool)
+    for obj in objects:
+        margin = drill_radius_m + safety_margin_m(obj, registration_sigma_m)
+        reach = margin + 0.5 * obj.width_m + res
+        for measured, hit in ((True, keep), (False, inferred)):
+            for part in obj.parts(measured):
+                (px0, py0), (px1, py1) = part.min(axis=0) - reach, part.max(axis=0) + reach
+                c = np.flatnonzero((xs >= px0) & (xs <= px1))
+                r = np.flatnonzero((ys >= py0) & (ys <= py1))
+                if c.size == 0 or r.size == 0:
+                    continue
+                gx, gy = np.meshgrid(xs[c], ys[r])
+                d = distances_to_part(part, obj, np.column_stack([gx.ravel(), gy.ravel()]))
+                hit[np.ix_(r, c)] |= (d - margin < 0).reshape(r.size, c.size)
+    out[inferred] = VERDICT_CODES[UNKNOWN]
+    out[keep] = VERDICT_CODES[KEEP_AWAY]
+    # rule 1: outside the wall
+    inside = (xs[None, :] >= x0) & (xs[None, :] <= x1) & (ys[:, None] >= y0) & (ys[:, None] <= y1)
+    out[~inside] = VERDICT_CODES[UNKNOWN]
+    return out

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from geometry import provenance
 from geometry.errors import InputError
 
 FORMAT = "arproj-objects/2"
@@ -198,7 +199,8 @@ def read_objects(path: str | Path) -> list[MappedObject]:
 
 
 def objects_document(objects: list[MappedObject], scanned_regions: list[dict] | None = None) -> dict:
-    doc: dict = {"format": FORMAT, "frame": "wall", "units": "m", "objects": [o.to_json() for o in objects]}
+    doc: dict = {"format": FORMAT, "made_by": provenance.record(), "frame": "wall", "units": "m",
+                 "objects": [o.to_json() for o in objects]}
     if scanned_regions is not None:
         doc["scanned_regions_m"] = scanned_regions
     return doc

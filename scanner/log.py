@@ -82,6 +82,7 @@ from typing import Any
 
 import numpy as np
 
+from geometry import provenance
 from geometry.errors import InputError
 from scanner.channels import NAMES as CHANNEL_NAMES
 from scanner.laser import LASER_KEYS
@@ -221,7 +222,7 @@ class ScanLog:
                                      "continue it with `arproj scan --resume LOG` or choose another --log path")
                 _check_is_scan_log(path)
             entries = {"format": FORMAT, "created": datetime.now(UTC).isoformat(timespec="seconds"),
-                       "status": "running", **meta}
+                       "made_by": provenance.record(), "status": "running", **meta}
             _build_whole(path, entries)
             return cls(path, _connect(path), writable=True, lock=lock)
         except BaseException:

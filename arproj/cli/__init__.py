@@ -55,6 +55,18 @@ try:  # everything the commands need is imported here: a Ctrl-C meanwhile is one
     )
     app.add_typer(bench_app, name="bench")
 
+    def _print_version(asked: bool) -> None:
+        if asked:
+            from geometry import provenance
+
+            print(f"arproj {provenance.version()}")
+            raise typer.Exit()
+
+    @app.callback()
+    def _options(version: bool = typer.Option(False, "--version", is_eager=True, callback=_print_version,
+                                              help="Print arproj's version and exit.")) -> None:
+        pass
+
     for _module in sorted(m.name for m in pkgutil.iter_modules(__path__)):
         importlib.import_module(f"{__name__}.{_module}").register(app, bench_app)
 except KeyboardInterrupt:
@@ -65,7 +77,9 @@ except KeyboardInterrupt:
 def main() -> None:
     """Console-script entry point."""
     from arproj.console import err_console
+    from geometry import provenance
 
+    provenance.set_command(sys.argv[1:])
     previous = signal.getsignal(signal.SIGINT)
     handled = threading.current_thread() is threading.main_thread() and previous is signal.default_int_handler
     if handled:  # not when started with SIGINT ignored (or from a thread, or under another handler)

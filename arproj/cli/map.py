@@ -16,7 +16,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     def map_command(
         log: Path = typer.Argument(..., help="Scan log (SQLite) written by `arproj scan --log LOG`."),
         out: Path = typer.Option(Path("map"), "--out", help="Folder for wall.glb, objects.json, coverage.npz, "
-                                 "map.png, signals.png and objects.dxf."),
+                                 "map.png, signals.png, objects.dxf and map_server.yaml/.pgm (ROS)."),
         resolution_mm: float = typer.Option(4.0, "--resolution", help="Map cell size in millimetres."),
         no_stitch: bool = typer.Option(False, "--no-stitch", help="Use the logged sample positions as they "
                                        "are (skip frame alignment)."),

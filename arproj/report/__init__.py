@@ -66,6 +66,7 @@ def _figure(out: Path, file: str, caption: str) -> str:
 def write_report(ctx: Any) -> Path:
     """Write OUT/report.html from the demo context (figures, pictures, stage records); returns its path."""
     from arproj.session.robot_io import TRUTH_PRIOR
+    from geometry import provenance
 
     out: Path = ctx.out
     figures: dict[str, dict[str, Any]] = ctx.figures
@@ -75,7 +76,8 @@ def write_report(ctx: Any) -> Path:
              f"<p class=muted>Wall file {html.escape(str(ctx.wall_path))} ({html.escape(ctx.wall.name)}, "
              f"{ctx.wall.width_m} × {ctx.wall.height_m} m, {len(ctx.wall.objects)} objects); seed "
              f"{ctx.options.seed}{', quick settings' if ctx.options.quick else ''}; written "
-             f"{time.strftime('%Y-%m-%d %H:%M')}.</p>"]
+             f"{time.strftime('%Y-%m-%d %H:%M')} by arproj {html.escape(provenance.version())}, command "
+             f"<code>{html.escape(provenance.command())}</code>.</p>"]
     problems = [r for r in ctx.stages.values() if r.status in ("failed", "not run")]
     if problems:
         parts.append("<p class=bad>Not complete: " + "; ".join(
@@ -129,7 +131,8 @@ def write_report(ctx: Any) -> Path:
     total = sum(r.seconds or 0.0 for r in ctx.stages.values())
     parts.append(f"<tr><td><b>total</b></td><td></td><td class=num><b>{total:.1f}</b></td></tr></table>")
     parts.append("<p class=muted>Files: scan.db (scan log), map/ (wall.glb, objects.json, map.png, signals.png, "
-                 "objects.dxf, range_images.npz), rig/ (calibration), demo-state.json (for --resume).</p>")
+                 "objects.dxf, map_server.yaml/.pgm, range_images.npz), rig/ (calibration), demo-state.json "
+                 "(for --resume).</p>")
     parts.append("</body></html>")
     path = out / "report.html"
     path.write_text("\n".join(parts), encoding="utf-8")

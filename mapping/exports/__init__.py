@@ -1,5 +1,5 @@
 """Exports of a map, one module per file format (as trimesh's `exchange/`): wall.glb, objects.json,
-coverage.npz, map.png, signals.png, objects.dxf.
+coverage.npz, map.png, signals.png, objects.dxf, map_server.yaml (+ .pgm).
 
 A format is a module here with `FILE_NAME` (what it writes into the map folder), `ORDER` (where `arproj map`
 writes it; the projection session's wall.glb first) and `write(job: ExportJob) -> Path`. Adding a format is
@@ -34,8 +34,9 @@ def formats() -> list[ModuleType]:
 
 
 def file_names() -> set[str]:
-    """The names of every file the exports write into a map folder."""
-    return {m.FILE_NAME for m in formats()}
+    """The names of every file the exports write into a map folder (a format writing more than one file lists
+    the others in EXTRA_FILES)."""
+    return {name for m in formats() for name in (m.FILE_NAME, *getattr(m, "EXTRA_FILES", ()))}
 
 
 def export_steps(data: ScanData, result: MapResult, out_dir: str | Path, mesh: trimesh.Trimesh | None = None,

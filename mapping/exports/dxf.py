@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from geometry import provenance
 from mapping import mapfile
 from mapping.exports.common import ExportJob
 from mapping.fusion import CLASSES
@@ -24,6 +25,9 @@ def write_dxf(objects: list[mapfile.MappedObject], path: str | Path) -> Path:
 
     path = Path(path)
     doc = ezdxf.new(units=ezdxf.units.MM, setup=True)
+    made_by = provenance.record()
+    doc.header.custom_vars.append("ARPROJ_VERSION", made_by["version"])
+    doc.header.custom_vars.append("ARPROJ_COMMAND", made_by["command"])
     msp = doc.modelspace()
     aci = {"power_line": 1, "metal_pipe": 5, "metal": 6, "non_metal": 30, "cavity": 4, "fastener": 2}
     for cls in CLASSES:

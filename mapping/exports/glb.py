@@ -20,6 +20,7 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from geometry import provenance
 from mapping import mapfile
 from mapping.exports.common import ExportJob, looked
 from mapping.fusion import CLASSES, class_map
@@ -51,6 +52,7 @@ def write_wall_glb(result: MapResult, path: str | Path, mesh: trimesh.Trimesh | 
     base = mesh if mesh is not None else flat_wall_mesh(x0, y0, x1, y1)
     textured = textured_wall_mesh(base, wall_texture(result, px_per_m, objects), result.bounds)
     scene = trimesh.Scene(textured)
-    scene.metadata["extras"] = {"frame": "wall", "units": "m", "bounds_m": list(result.bounds)}
+    scene.metadata["extras"] = {"frame": "wall", "units": "m", "bounds_m": list(result.bounds),
+                                "made_by": provenance.record()}
     path.write_bytes(scene.export(file_type="glb"))
     return path

@@ -15,35 +15,17 @@ from mapping.grid import GridInfo
 from mapping.mapfile import MappedObject, read_objects
 from mapping.pipeline import MapSettings, build_map
 from mapping.simscan import simulate_scan
-from scanner.wall import wall_from_dict
-
-# A one-frame wall with every kind of hazard: a live and a dead cable, a copper pipe, a water-filled plastic
-# pipe (capacitive only) and a screw.
-WALL = {
-    "format": "arproj-wall/1", "name": "drill test wall", "width_m": 0.35, "height_m": 0.40, "material": "brick",
-    "objects": [
-        {"kind": "cable", "id": "live", "points_m": [[0.08, 0.0], [0.08, 0.40]], "depth_m": 0.02, "live": True},
-        {"kind": "cable", "id": "dead", "points_m": [[0.0, 0.30], [0.35, 0.30]], "depth_m": 0.02, "live": False},
-        {"kind": "pipe", "id": "copper", "points_m": [[0.0, 0.12], [0.35, 0.12]], "depth_m": 0.03,
-         "material": "copper", "diameter_m": 0.015},
-        {"kind": "pipe", "id": "water", "points_m": [[0.24, 0.0], [0.24, 0.40]], "depth_m": 0.025,
-         "material": "plastic", "diameter_m": 0.02, "water_filled": True},
-        {"kind": "screw", "id": "screw", "points_m": [[0.16, 0.21]], "depth_m": 0.005},
-    ]}
-CLEAR_SPOT = (0.16, 0.05)  # 8 cm from the live cable, the water pipe and the copper pipe: nothing there
+from tests.support.hazard_wall import CLEAR_SPOT, hazard_wall, hazard_wall_dense_map
 
 
 @pytest.fixture(scope="module")
 def wall():
-    return wall_from_dict(WALL, "drill test wall")
+    return hazard_wall()
 
 
 @pytest.fixture(scope="module")
 def dense(wall):
-    # no robot placement error, so the 1 cm raster covers the whole wall from its lower edge up
-    data = simulate_scan(wall, seed=4, robot_sigma=(0.0, 0.0, 0.0), loc_sigma=(1e-4, 1e-4, 1e-5))
-    result = build_map(data, MapSettings(stitch=False))
-    return result, result.mapped_objects()
+    return hazard_wall_dense_map()
 
 
 def _verdict(result, objects, xy, **kw):
@@ -194,3 +176,19 @@ def test_objects_json_round_trips_measured_flags_and_depth(dense, tmp_path):
         np.testing.assert_allclose(a.points_m, b.points_m, atol=1e-5)  # written with 5 decimals
     doc = json.loads(path.read_text())
     assert doc["format"] == "arproj-objects/2"
+
+
+def test_the_raster_of_verdicts_is_check_point_at_every_cell(dense) -> None:
+    """verdict_raster is check_point at each cell's centre (the map_server export and others read it), with and
+    without a registration σ; every verdict occurs, so the comparison means something."""
+    result, objects = dense
+    info = result.coverage.info
+    for sigma in (0.0, 0.003):
+        raster = drill.verdict_raster(objects, result.coverage, result.bounds, registration_sigma_m=sigma)
+        rows, cols = np.meshgrid(np.arange(info.height), np.arange(info.width), indexing="ij")
+        xy = np.column_stack([info.origin_x + (cols.ravel() + 0.5) * info.resolution,
+                              info.origin_y + (rows.ravel() + 0.5) * info.resolution])
+        expected = np.array([drill.VERDICT_CODES[v.verdict] for v in drill.check_points(
+            xy, objects, result.coverage, result.bounds, registration_sigma_m=sigma)], np.int8)
+        assert set(np.unique(expected)) == set(drill.VERDICT_CODES.values())
+        np.testing.assert_array_equal(raster.ravel(), expected)

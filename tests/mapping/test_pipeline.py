@@ -53,7 +53,8 @@ def test_log_round_trip_exports_and_cli(plate, tmp_path):
     run = CliRunner().invoke(app, ["map", str(path), "--out", str(out), "--wall", str(wall.source)])
     assert run.exit_code == 0, run.output
     assert "recall 100.0%" in run.output
-    for name in ("wall.glb", "objects.json", "map.png", "signals.png", "objects.dxf"):
+    for name in ("wall.glb", "objects.json", "map.png", "signals.png", "objects.dxf", "map_server.yaml",
+                 "map_server.pgm"):
         assert (out / name).is_file(), name
     import cv2
 
