@@ -44,7 +44,7 @@ import yaml
 from numpy.typing import NDArray
 
 from geometry.errors import InputError
-from geometry.poses import make_pose
+from geometry.poses import invert, make_pose
 from scanner.laser import ROOM_KEYS, LaserConfig
 from scanner.wall import Wall
 from wallpose.pose import RoomMap, wall_frames
@@ -129,6 +129,22 @@ def simulated_room(wall_width_m: float, wall_height_m: float, survey: LaserConfi
     corners, _, T = room_layout(wall_width_m + 2 * cfg.side_margin_m, cfg.room_depth_m, cfg.side_margin_m,
                                 cfg.floor_margin_m)
     return corners, cfg.room_height_m, T
+
+
+def simulated_projection_scene(wall_width_m: float, wall_height_m: float, distance_m: float = 2.5,
+                               incidence_deg: float = 0.0, aim_xy: tuple[float, float] | None = None
+                               ) -> tuple[dict[str, Any], NDArray[np.float64]]:
+    """The simulated projection site around a scanned wall of this size: arproj.sim.site.Site.build's section
+    overrides (the scanning simulator's true room, simulated_room; the robot distance_m before the wall, aimed
+    at wall point aim_xy, default its centre) and the wall's true T_room_from_wall there. One layout for
+    `arproj project --sim --site` and the projection site `arproj devices serve --projection` serves."""
+    corners, height, T_room_from_map = simulated_room(wall_width_m, wall_height_m)
+    offset = invert(wall_frames(corners)[0][0]) @ T_room_from_map  # the wall's corner on room wall 0
+    aim = aim_xy or (wall_width_m / 2, wall_height_m / 2)
+    scene = {"room": {"corners_m": corners.tolist(), "height_m": height},
+             "robot": {"distance_m": distance_m, "incidence_deg": incidence_deg, "wall": 0,
+                       "along_m": float(offset[0, 3] + aim[0]), "aim_height_m": float(offset[1, 3] + aim[1])}}
+    return scene, T_room_from_map
 
 
 def _combine(rooms: list[dict[str, float]], key: str) -> tuple[float, float, int]:

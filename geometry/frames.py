@@ -4,6 +4,7 @@
           │                  x right along the wall, y up, z out of the wall into the room (metres)
           └─ robot ─┬─ head ── projector      head: the moving plate of the 3-DOF pan/tilt head
                     ├─ camera_left ── camera_right
+                    ├─ laser                 the 2-D laser, fixed to the body (its scan plane z = 0)
                     └─ scanner               the wall scanner on the xy linear drives
 
 Camera-like frames (projector, camera_left, camera_right) use OpenCV's convention: x right, y down,
@@ -22,6 +23,7 @@ FRAMES: tuple[str, ...] = (
     "camera_left",
     "camera_right",
     "scanner",
+    "laser",
 )
 
 

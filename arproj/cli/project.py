@@ -5,6 +5,8 @@
     arproj project --map wall.glb --rig RIG --head /dev/ttyUSB0 --left 0 --right 1 --wall-prior prior.yaml \
         --window --screen 1
     arproj project --sim --site site.yaml --wall small_test_wall [--head URL]   # found again from the site file
+    arproj project --site site.yaml --wall K --rig RIG --head URL --laser URL --left CAM --right CAM \
+        --screen tcp://HOST:PORT                      # hardware: found again by the robot's 2-D laser
 """
 
 from __future__ import annotations
@@ -59,15 +61,21 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                    "0: until Ctrl-C."),
         output: Path = typer.Option(None, "--output", help="Also write every beamer frame to DIR as PNG."),
         window: bool = typer.Option(False, "--window", help="Show frames in a borderless fullscreen window."),
-        screen: int = typer.Option(0, "--screen", help="Display screen of the beamer for --window."),
+        screen: str = typer.Option("0", "--screen", help="Display screen of the beamer for --window, or a "
+                                   "screen server tcp://HOST:PORT that shows the frames sent to it (e.g. the "
+                                   "one `arproj devices serve --projection` serves)."),
         head_url: str = typer.Option(None, "--head", help="Pan/tilt head: serial port or socket:// URL."),
+        laser_url: str = typer.Option(None, "--laser", help="Hardware: the projection robot's 2-D laser (serial "
+                                      "port or socket:// URL, the laser protocol `arproj scan --laser` speaks); "
+                                      "with --site it finds the wall again. Its place on the robot is the rig's "
+                                      "T_robot_from_laser."),
         left: str = typer.Option("0", "--left", help="Left camera: index, file or URL (hardware)."),
         right: str = typer.Option("1", "--right", help="Right camera: index, file or URL (hardware)."),
         wall_prior: Path = typer.Option(None, "--wall-prior", help="Hardware: YAML with T_wall_from_robot "
                                         "(in-plane position of the wall frame)."),
         site: Path = typer.Option(None, "--site", help="Site file from `arproj scan` (site.yaml): find wall "
-                                  "--wall KEY again by the 2-D laser in the room the scan saw (with --sim: the "
-                                  "simulated scanning site's room); its map folder unless --map/--truth."),
+                                  "--wall KEY again by the 2-D laser (--laser URL; with --sim the simulated "
+                                  "site's) in the room the scan saw; its map folder unless --map/--truth."),
         head_fault: str = typer.Option(None, "--head-fault", help="--sim: inject a head fault: dead, "
                                        "slip:PAN,TILT (degrees) or flaky."),
         interactive: bool = typer.Option(False, "--interactive", help="After the first cycle, read commands "
@@ -90,7 +98,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             wall_index=wall_index, distance=distance, incidence=incidence,
             aim=_point(aim, "--aim") if aim else None, drill=_point(drill, "--drill") if drill else None,
             follow=_points(follow, "--follow") if follow else [], cycles=cycles, output=output, window=window,
-            screen=screen, head_url=head_url, left=left, right=right, wall_prior=wall_prior,
+            screen=screen, head_url=head_url, laser_url=laser_url, left=left, right=right, wall_prior=wall_prior,
             head_fault=head_fault, commands=_stdin_lines() if interactive else None, site=site,
             site_key=wall_key if site is not None else None)
         result = run_session(options, say=lambda text: err_console.print(text, highlight=False))

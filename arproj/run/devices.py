@@ -1,11 +1,17 @@
 """Virtual hardware as separate processes: the simulators `arproj devices serve` runs, each on loopback
 `socket://` URLs, found in one registry so that another simulator (a virtual screen, cameras) is one more entry.
 
-A simulator factory takes the `ServeRequest` (the wall, the seed, the fault rate) and returns what it serves:
-an object with `urls` (name → URL, the names `arproj scan`/`arproj project` take as options) and `close()`.
-`serve_devices` starts every registered one; the scanning robot's four (drives, scanner, base, laser) are
-scanner.sim.devices.SiteServers on the same simulated site `arproj scan --sim` builds, so a scan against them
-gives the samples of `arproj scan --sim` with the same seed.
+A simulator factory takes the `ServeRequest` (the wall, the seed, the fault rate, whether the projection site
+is asked for) and returns what it serves — an object with `urls` (name → URL, the names `arproj scan`/`arproj
+project` take as options) and `close()` — or None when the request does not ask for it. `serve_devices` starts
+every registered one; the scanning robot's four (drives, scanner, base, laser) are scanner.sim.devices.SiteServers
+on the same simulated site `arproj scan --sim` builds, so a scan against them gives the samples of `arproj scan
+--sim` with the same seed.
+
+With `projection`, the projection robot's site is served instead of the bare head (arproj.sim.live.LiveSite on
+the site `arproj project --sim --site` builds around the wall, simulated_projection_scene): the beamer's screen
+(tcp://), the two cameras (MJPEG over http://), the head on it and its 2-D laser (`projection_laser`, the
+laser's line protocol) — what `arproj project --screen --left --right --head --laser` opens on hardware.
 """
 
 from __future__ import annotations
@@ -35,6 +41,8 @@ class ServeRequest:
     wall_source: str
     seed: int = 0
     faults: float = 0.0  # probability of a fault per frame a device sends (devices.sim.FaultConfig.rate)
+    projection: bool = False  # also the projection robot's site (screen, cameras, head, laser)
+    distance_m: float = 2.5  # the projection robot's distance to the wall (as `arproj project --distance`)
 
 
 class Served(Protocol):
@@ -44,7 +52,7 @@ class Served(Protocol):
     def close(self) -> None: ...
 
 
-SimulatorFactory = Callable[[ServeRequest], Served]
+SimulatorFactory = Callable[[ServeRequest], Served | None]
 SIMULATORS: dict[str, SimulatorFactory] = {}  # name -> factory, in the order they are served
 
 
@@ -77,12 +85,43 @@ class _Head:
         self.head.close()
 
 
+def _head_faults(rate: float) -> HeadFaults:
+    """The fault rate split over dropped, corrupted and garbled replies."""
+    return HeadFaults(drop_reply_rate=rate / 4, corrupt_reply_rate=rate / 4, garbage_rate=rate / 2)
+
+
 @register_simulator("pan/tilt head")
-def pan_tilt_head(request: ServeRequest) -> _Head:
-    """The projection robot's Pelco-D head; the fault rate split over dropped, corrupted and garbled replies."""
-    p = request.faults
-    return _Head(HeadSimulator(faults=HeadFaults(drop_reply_rate=p / 4, corrupt_reply_rate=p / 4,
-                                                 garbage_rate=p / 2), seed=request.seed))
+def pan_tilt_head(request: ServeRequest) -> _Head | None:
+    """The projection robot's Pelco-D head alone (with `projection` the projection site's own head instead)."""
+    if request.projection:
+        return None
+    return _Head(HeadSimulator(faults=_head_faults(request.faults), seed=request.seed))
+
+
+class _ProjectionSite:
+    PROJECTION_LASER = "projection_laser"
+
+    def __init__(self, request: ServeRequest) -> None:
+        from arproj.sim.live import LiveSite
+        from arproj.site_file import simulated_projection_scene
+
+        scene, _ = simulated_projection_scene(request.wall.width_m, request.wall.height_m, request.distance_m)
+        self.live = LiveSite(seed=request.seed, scene=scene, head_faults=_head_faults(request.faults))
+
+    @property
+    def urls(self) -> dict[str, str]:
+        u = self.live.urls
+        return {"screen": u.screen, "camera_left": u.camera_left, "camera_right": u.camera_right, "head": u.head,
+                self.PROJECTION_LASER: u.laser2d}
+
+    def close(self) -> None:
+        self.live.close()
+
+
+@register_simulator("projection site")
+def projection_site(request: ServeRequest) -> _ProjectionSite | None:
+    """The projection robot on the simulated site around the wall: screen, cameras, head and 2-D laser."""
+    return _ProjectionSite(request) if request.projection else None
 
 
 @contextmanager
@@ -92,6 +131,8 @@ def serve_devices(request: ServeRequest) -> Iterator[dict[str, dict[str, str]]]:
         served: dict[str, dict[str, str]] = {}
         for name, factory in SIMULATORS.items():
             simulator = factory(request)
+            if simulator is None:
+                continue
             stack.callback(simulator.close)
             served[name] = simulator.urls
         yield served

@@ -12,16 +12,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from arproj.session import registration
-from arproj.session.output import BeamerWindow, FileOutput, MemoryOutput
+from arproj.session.output import BeamerWindow, FileOutput, MemoryOutput, ScreenStream
 from arproj.session.wallmap import WallMap, load_wall_map, wall_map_from_wall_file
-from arproj.site_file import SiteWall, read_site_wall, simulated_room
+from arproj.site_file import SiteWall, read_site_wall, simulated_projection_scene
 from devices.errors import DeviceError
 from devices.pelco_d import PanTiltHead
 from devices.sim import HeadFaults
 from geometry.errors import InputError
 from geometry.poses import invert
 from geometry.rig import Rig
-from wallpose.pose import wall_frames
 
 
 @dataclass
@@ -41,8 +40,9 @@ class SessionOptions:
     cycles: int = 1
     output: Path | None = None
     window: bool = False
-    screen: int = 0
+    screen: str = "0"     # --window's display, or a screen server tcp://HOST:PORT (frames sent there)
     head_url: str | None = None
+    laser_url: str | None = None  # hardware: the projection robot's 2-D laser (devices/laser2d.py)
     left: str = "0"
     right: str = "1"
     wall_prior: Path | None = None
@@ -104,13 +104,9 @@ def simulated_site_for(site_wall: SiteWall, options: SessionOptions, ctx: object
     T_room_from_wall there."""
     from arproj.sim.site import Site
 
-    corners, height, T_room_from_map = simulated_room(site_wall.width_m, site_wall.height_m)
-    offset = invert(wall_frames(corners)[0][0]) @ T_room_from_map  # the wall's corner on room wall 0
-    aim = options.aim or (site_wall.width_m / 2, site_wall.height_m / 2)
-    site = Site.build(seed=options.seed, ctx=ctx, room={"corners_m": corners.tolist(), "height_m": height},
-                      robot={"distance_m": options.distance, "incidence_deg": options.incidence, "wall": 0,
-                             "along_m": float(offset[0, 3] + aim[0]), "aim_height_m": float(offset[1, 3] + aim[1])})
-    return site, T_room_from_map
+    scene, T_room_from_map = simulated_projection_scene(site_wall.width_m, site_wall.height_m, options.distance,
+                                                        options.incidence, options.aim)
+    return Site.build(seed=options.seed, ctx=ctx, **scene), T_room_from_map
 
 
 def _head_faults(spec: str | None) -> HeadFaults:
@@ -140,7 +136,7 @@ def check_rig_matches(rig: Rig, cameras: dict) -> None:
 
 def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> dict:
     """Run the session as the options say; returns a JSON-able summary of every cycle."""
-    from arproj.session.robot_io import HardwareRobot, SimulatedRobot, nominal_rig
+    from arproj.session.robot_io import SimulatedRobot, nominal_rig
     from arproj.session.session import ProjectionSession
 
     site_wall = open_site_wall(options)
@@ -154,16 +150,24 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
     robot = None
     site = None
     ctx = None  # one GL context for the simulated site and the map renderer, released at the end
-    if options.window:
-        projector_size = (1280, 800) if rig is None else rig.intrinsics["projector"].size \
-            if "projector" in rig.intrinsics else (1280, 800)
+    projector_size = (1280, 800) if rig is None else rig.intrinsics["projector"].size \
+        if "projector" in rig.intrinsics else (1280, 800)
+    if options.screen.startswith("tcp://"):  # a screen server (one beside the beamer, or a simulated site's)
+        outputs.append(ScreenStream(options.screen))
+    elif not options.screen.isdigit():
+        raise InputError(f"--screen {options.screen!r} is neither a display number nor tcp://HOST:PORT",
+                         "e.g. --screen 1 --window, or --screen tcp://127.0.0.1:5000")
+    elif options.window:
         try:
-            outputs.append(BeamerWindow(*projector_size, screen=options.screen))
+            outputs.append(BeamerWindow(*projector_size, screen=int(options.screen)))
         except InputError as err:
             say(f"[yellow]warning:[/] {err} — going on without the window" +
                 (f"; frames are written to {options.output}" if options.output else ""))
     multi = MultiOutput(outputs, say)
     try:
+        if options.sim and options.laser_url is not None:
+            raise InputError("--laser reads the robot's laser at a URL on hardware; with --sim the simulated "
+                             "site's laser is read", "drop --laser, or run without --sim")
         if options.sim:
             from arproj.sim.site import Site
             from render.gl import create_context
@@ -193,16 +197,13 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
         else:
             if rig is None:
                 raise InputError("no rig given", "pass --rig RIG_DIR (from `arproj calibrate`), or --sim")
-            if site_wall is not None:
-                raise InputError(f"--site {options.site}: on hardware the projection robot's 2-D laser is not "
-                                 "driven by `arproj project` yet, so the wall cannot be found again from the site "
-                                 "file", "pass --wall-prior FILE (T_wall_from_robot), or --sim")
-            if options.wall_prior is None:
+            if site_wall is not None and options.laser_url is None:
+                raise InputError(f"--site {options.site}: finding wall {site_wall.key!r} again on hardware needs "
+                                 "the projection robot's 2-D laser", "pass --laser URL (or --wall-prior FILE)")
+            if site_wall is None and options.wall_prior is None:
                 raise InputError("hardware sessions need --wall-prior FILE (T_wall_from_robot), or --site FILE "
-                                 "--wall KEY on the simulated site (--sim)")
-            head = PanTiltHead(options.head_url) if options.head_url else None
-            robot = HardwareRobot(options.left, options.right, rig.intrinsics["camera_left"],
-                                  rig.intrinsics["camera_right"], multi, head, options.wall_prior)
+                                 "--wall KEY with the robot's 2-D laser (--laser URL)")
+            robot = _hardware_robot(options, rig, multi, site_wall)
         result = _run(ProjectionSession, rig, wall_map, robot, options, memory, say, ctx)
         if site is not None and isinstance(robot, SimulatedRobot) and result.get("registration"):
             result["registration"]["truth"] = _registration_truth(site, robot, result["registration"], rig)
@@ -215,6 +216,33 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
             site.release()
         if ctx is not None:
             ctx.release()
+
+
+def _hardware_robot(options: SessionOptions, rig: Rig, output: MultiOutput, site_wall: SiteWall | None) -> Any:
+    """The robot on hardware: cameras, head and (--laser) the 2-D laser, at their URLs; whatever was opened is
+    closed again when a later device fails."""
+    from arproj.session.robot_io import DeviceLaser, HardwareRobot
+
+    laser = None
+    if options.laser_url is not None:
+        try:
+            T_robot_from_laser = rig.pose("T_robot_from_laser")
+        except InputError:
+            raise InputError(f"--laser: the rig {options.rig_dir} does not say where the laser sits on the robot "
+                             "(poses: T_robot_from_laser)", "add T_robot_from_laser (4x4, metres, from the "
+                             "robot's drawing) to the rig file's poses") from None
+        laser = DeviceLaser(options.laser_url, T_robot_from_laser)
+    head = None
+    try:
+        head = PanTiltHead(options.head_url) if options.head_url else None
+        return HardwareRobot(options.left, options.right, rig.intrinsics["camera_left"],
+                             rig.intrinsics["camera_right"], output, head, options.wall_prior, laser=laser,
+                             site_wall=site_wall)
+    except BaseException:
+        for device in (head, laser):
+            if device is not None:
+                device.close()
+        raise
 
 
 def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options: SessionOptions,

@@ -20,6 +20,8 @@ from numpy.typing import NDArray
 from arproj.session.output import FrameOutput
 from arproj.session.relocalise import START_SIGMA_DEG, START_SIGMA_M, fix_in_site
 from arproj.site_file import SiteWall
+from calibration.capture import SETTLE_TIMEOUT_S
+from devices.errors import DeviceError, DeviceResetError
 from devices.pelco_d import PanTiltHead
 from devices.sim import HeadFaults, HeadSimulator
 from geometry.errors import InputError
@@ -232,53 +234,120 @@ def read_wall_prior(path: str | Path) -> NDArray[np.float64]:
     return T
 
 
+LASER_HEAD = "H"  # the projection robot's 2-D laser head that scans the horizontal plane
+LASER_HINT = "check the laser's cable and power, or its URL (--laser)"
+
+
+class DeviceLaser:
+    """The projection robot's 2-D laser at a serial URL (devices/laser2d.py, the scan's own client): one turn
+    of its horizontal head as robot-frame points, the laser's place on the robot from the rig."""
+
+    def __init__(self, url: str, T_robot_from_laser: NDArray[np.float64], timeout_s: float = 0.5,
+                 attempts: int = 4) -> None:
+        from devices.crclines import CrcLineFramer
+        from devices.laser2d import Laser2D
+        from devices.link import SerialLink
+
+        self.T_robot_from_laser = np.asarray(T_robot_from_laser, dtype=np.float64)
+        self.attempts = attempts
+        self.link = SerialLink(url, CrcLineFramer(), "laser", timeout_s=timeout_s, hint=LASER_HINT)
+        self.link.open()
+        try:
+            self.laser = Laser2D(self.link)
+            heads = self.laser.heads()
+        except BaseException:
+            self.link.close()
+            raise
+        if LASER_HEAD in heads or len(heads) == 1:
+            self.head = LASER_HEAD if LASER_HEAD in heads else heads[0]
+        else:
+            self.link.close()
+            raise DeviceError(f"the laser at {url} has heads {heads}: which one scans the horizontal plane is "
+                              f"not known (the projection robot's is {LASER_HEAD})", LASER_HINT)
+        self.turns = 0
+
+    def points(self) -> NDArray[np.float64]:
+        """One fresh turn, (n, 3) robot-frame returns in metres (no-return rays dropped); a device reset during
+        the turn (its buffer gone) takes the turn again."""
+        from arproj.sim.site import LaserScan
+
+        for _ in range(self.attempts):
+            self.turns += 1
+            try:
+                angles, ranges = self.laser.scan(self.head, self.turns)
+            except DeviceResetError:
+                continue
+            return LaserScan(angles, ranges, self.T_robot_from_laser).points_robot()
+        raise DeviceError(f"the laser at {self.link.url} reset {self.attempts} times in one turn", LASER_HINT)
+
+    @property
+    def origin(self) -> NDArray[np.float64]:
+        return self.T_robot_from_laser[:3, 3]
+
+    def close(self) -> None:
+        self.link.close()
+
+
 class HardwareRobot:
-    """Real cameras (OpenCV), the beamer output and a Pelco-D head. The in-plane part of the wall frame comes
-    from a prior file (T_wall_from_robot), e.g. from the robot's localization in the building plan."""
+    """Real cameras (OpenCV, read continuously: each capture takes the first settled frame after the pattern
+    is shown), the beamer output and a Pelco-D head. The in-plane part of the wall frame comes from a prior
+    file (T_wall_from_robot, e.g. from the robot's localization in the building plan), or with a site file and
+    the robot's 2-D laser from the laser's fix in the site's room (arproj.session.relocalise), as on the
+    simulated site."""
 
     def __init__(self, left: str, right: str, camera_left: Intrinsics, camera_right: Intrinsics,
-                 output: FrameOutput, head: PanTiltHead | None, wall_prior_path: str | Path,
-                 in_plane_sigma_m: float = 0.01, settle_s: float = 0.15) -> None:
-        self._prior = read_wall_prior(wall_prior_path)
+                 output: FrameOutput, head: PanTiltHead | None, wall_prior_path: str | Path | None = None,
+                 in_plane_sigma_m: float = 0.01, settle_s: float = 0.15, laser: DeviceLaser | None = None,
+                 site_wall: SiteWall | None = None, settle_timeout_s: float = SETTLE_TIMEOUT_S) -> None:
+        from calibration.capture import LiveCamera
+
+        if site_wall is not None and laser is None:
+            raise InputError(f"--site: finding wall {site_wall.key!r} again needs the robot's 2-D laser",
+                             "give the laser (--laser URL), or --wall-prior FILE")
+        if site_wall is None and wall_prior_path is None:
+            raise InputError("hardware sessions need --wall-prior FILE (T_wall_from_robot), or --site FILE "
+                             "--wall KEY with the robot's 2-D laser (--laser URL)")
+        self._prior = None if wall_prior_path is None else read_wall_prior(wall_prior_path)
         self.in_plane_sigma_m = in_plane_sigma_m
-        self._left = open_camera(left, camera_left, "camera_left")
+        self.laser, self.site_wall = laser, site_wall
+        self._left = LiveCamera(open_camera(left, camera_left, "camera_left"), "camera_left")
         try:
-            self._right = open_camera(right, camera_right, "camera_right")
-        except InputError:
-            self._left.release()
+            self._right = LiveCamera(open_camera(right, camera_right, "camera_right"), "camera_right")
+        except BaseException:
+            self._left.close()
             raise
         self.output = output
         self.head = head
-        self.settle_s = settle_s
+        self.settle_s, self.settle_timeout_s = settle_s, settle_timeout_s
 
     def capture(self, frame: NDArray[np.uint8]) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
         self.show(frame)
-        time.sleep(self.settle_s)  # the beamer needs a frame or two to show the new image
-        images = []
-        for cap, name in ((self._left, "camera_left"), (self._right, "camera_right")):
-            for _ in range(2):  # drop buffered frames taken before the new image was shown
-                cap.grab()
-            ok, image = cap.read()
-            if not ok:
-                raise InputError(f"{name}: the camera stopped delivering pictures", "check its cable")
-            images.append(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY))
-        return images[0], images[1]
+        after = time.monotonic() + self.settle_s  # the beamer needs a frame or two to show the new image
+        return (self._left.settled_frame(after, self.settle_timeout_s),
+                self._right.settled_frame(after, self.settle_timeout_s))
 
     def show(self, frame: NDArray[np.uint8]) -> None:
         self.output.show(frame)
 
-    def laser_points(self) -> None:
-        return None
+    def laser_points(self) -> NDArray[np.float64] | None:
+        return None if self.laser is None else self.laser.points()
 
-    def full_pose_inputs(self, normal_robot: NDArray[np.float64] | None = None) -> None:
-        return None  # hardware: the in-plane part comes from the wall-prior file
+    def full_pose_inputs(self, normal_robot: NDArray[np.float64] | None = None) -> PoseInputs | None:
+        if self.site_wall is None or self.laser is None:
+            return None  # the in-plane part comes from the wall-prior file
+        return site_pose_inputs(self.site_wall, self.laser.points(), self.laser.origin, normal_robot)
 
     def wall_prior(self) -> tuple[NDArray[np.float64], float, str]:
+        if self.site_wall is not None and self.laser is not None:
+            return site_wall_prior(self.site_wall, self.laser.points(), self.laser.origin)
+        assert self._prior is not None
         return self._prior, self.in_plane_sigma_m, "wall-prior file"
 
     def close(self) -> None:
-        self._left.release()
-        self._right.release()
+        self._left.close()
+        self._right.close()
+        if self.laser is not None:
+            self.laser.close()
         if self.head is not None:
             self.head.close()
         self.output.close()
@@ -291,5 +360,6 @@ def nominal_rig(site: RobotSite) -> Rig:
     return Rig(intrinsics={"camera_left": site.camera_left, "camera_right": site.camera_right,
                            "projector": site.projector},
                poses={"T_robot_from_camera_left": site.T_robot_from_camera_left,
-                      "T_camera_right_from_camera_left": site.T_camera_right_from_camera_left},
+                      "T_camera_right_from_camera_left": site.T_camera_right_from_camera_left,
+                      "T_robot_from_laser": site.T_robot_from_laser},
                head=site.head_nominal, quality={"source": "simulated site design values (not calibrated)"})

@@ -10,6 +10,8 @@ Pelco-D head on a serial port, a 2-D laser — is served here on 127.0.0.1 from 
     head          socket://127.0.0.1:R       the Pelco-D head simulator (devices/sim), as PanTiltHead opens it
     laser         http://127.0.0.1:Q/laser.json   one scan: angles_rad, ranges_m (null: no return),
                                              T_robot_from_laser
+    laser2d       socket://127.0.0.1:S       the same laser in the 2-D laser's line protocol (devices/laser2d.py,
+                                             one head H), as `arproj project --laser` reads it on hardware
     board         http://127.0.0.1:Q/board/next?plan=stereo|wall|mount   the site's "person" puts the printed
                                              board at its next pose (stereo: held in front of both cameras as
                                              the wizard's simulated station does; wall: in the beam before the
@@ -28,6 +30,11 @@ worker thread (its GL context is bound to it); everything else asks that thread.
     python -m arproj.sim.live [--seed N] [--small]    prints one JSON line of URLs (and projector_size),
                                                       serves until stdin closes (SpawnedLiveSite starts it)
     serve_live_site(seed=0) → LiveSite (urls, close()): the same in this process (for `arproj devices serve`)
+
+By default the site is the calibration station's (the robot 2 m before the default room's wall, the stereo
+mount off its drawing); `scene` gives Site.build's section overrides instead, e.g. the projection site
+`arproj project --sim --site` builds around a scanned wall (arproj.site_file.simulated_projection_scene), so
+that the same site runs in one process and served.
 """
 
 from __future__ import annotations
@@ -52,8 +59,9 @@ from numpy.typing import NDArray
 
 from calibration.boards import parse_board
 from calibration.defaults import DEFAULT_BOARD
-from devices.sim import HeadSimulator
+from devices.sim import DeviceServer, HeadFaults, HeadSimulator
 from geometry.poses import invert, make_pose, rotation_about
+from scanner.sim.devices import BufferedLaserSim
 
 DEFAULT_FPS = 20.0
 DISPLAY_LATENCY_S = 0.05  # a beamer shows a frame a little after it was sent
@@ -76,6 +84,7 @@ class LiveSiteUrls:
     camera_right: str
     head: str
     laser: str
+    laser2d: str
     board: str
     truth: str
 
@@ -88,8 +97,10 @@ class LiveSite:
 
     def __init__(self, seed: int = 0, small: bool = False, fps: float = DEFAULT_FPS,
                  display_latency_s: float = DISPLAY_LATENCY_S, distance_m: float = 2.0,
-                 mount_error: tuple[float, float] = (MOUNT_ERROR_DEG, MOUNT_ERROR_M)) -> None:
+                 mount_error: tuple[float, float] = (MOUNT_ERROR_DEG, MOUNT_ERROR_M),
+                 scene: dict[str, Any] | None = None, head_faults: HeadFaults | None = None) -> None:
         self.seed, self.small, self.fps, self.display_latency_s = seed, small, fps, display_latency_s
+        self.scene = scene
         self._jobs: queue.Queue[tuple[Callable[[Any], Any], queue.Queue]] = queue.Queue()
         self._stopping = threading.Event()
         self._ready: queue.Queue[BaseException | None] = queue.Queue()
@@ -104,16 +115,20 @@ class LiveSite:
         from arproj.wizard.sim_station import board_pose_plan
 
         self._stereo_plan = board_pose_plan(parse_board(BOARD), STEREO_PLAN_POSES, self._rng)
-        self.head_sim = HeadSimulator(seed=seed, initial_deg=(float(self._aim[0]), float(self._aim[1])))
+        self.head_sim = HeadSimulator(seed=seed, faults=head_faults,
+                                      initial_deg=(float(self._aim[0]), float(self._aim[1])))
         self._http = ThreadingHTTPServer(("127.0.0.1", 0), _handler(self))
         self._http.daemon_threads = True
         self._screen = _ScreenServer(self)
+        self._laser2d = DeviceServer(LiveLaserSim(self), stream=LIVE_LASER_STREAM)
+        self._laser2d.start()
         for server in (self._http, self._screen):
             threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
         http = f"http://127.0.0.1:{self._http.server_address[1]}"
         self.urls = LiveSiteUrls(screen=f"tcp://127.0.0.1:{self._screen.server_address[1]}",
                                  camera_left=f"{http}/left.mjpg", camera_right=f"{http}/right.mjpg",
-                                 head=self.head_sim.url, laser=f"{http}/laser.json", board=f"{http}/board",
+                                 head=self.head_sim.url, laser=f"{http}/laser.json",
+                                 laser2d=self._laser2d.url, board=f"{http}/board",
                                  truth=f"{http}/truth.json")
 
     # -- the worker that owns the site ------------------------------------------------------------------
@@ -121,11 +136,14 @@ class LiveSite:
         from arproj.sim.site import Site
 
         try:
-            cameras = {**SMALL["cameras"]} if self.small else {}
-            cameras.update(mount_error_deg=mount_error[0], mount_error_m=mount_error[1])
-            projector = SMALL["projector"] if self.small else {}
-            site = Site.build(seed=self.seed, cameras=cameras, projector=projector)
-            site.place_robot(distance_m, 0.0)
+            if self.scene is not None:  # the given site, the robot placed as its scene says
+                site = Site.build(seed=self.seed, **self.scene)
+            else:
+                cameras = {**SMALL["cameras"]} if self.small else {}
+                cameras.update(mount_error_deg=mount_error[0], mount_error_m=mount_error[1])
+                projector = SMALL["projector"] if self.small else {}
+                site = Site.build(seed=self.seed, cameras=cameras, projector=projector)
+                site.place_robot(distance_m, 0.0)
             p = site.projector
             # The head starts aimed so that the projected image's centre (not the optical axis, which lens
             # shift moves off the image) is in the cameras' view, as the wizard's simulated station aims it.
@@ -199,12 +217,10 @@ class LiveSite:
         return self.call(job)
 
     def laser_scan(self) -> dict:
-        def job(site: Any) -> dict:
-            scan = site.laser_scan()
-            return {"angles_rad": scan.angles_rad.tolist(),
-                    "ranges_m": [float(r) if np.isfinite(r) else None for r in scan.ranges_m],
-                    "T_robot_from_laser": scan.T_robot_from_laser.tolist()}
-        return self.call(job)
+        scan = self.call(lambda site: site.laser_scan())
+        return {"angles_rad": scan.angles_rad.tolist(),
+                "ranges_m": [float(r) if np.isfinite(r) else None for r in scan.ranges_m],
+                "T_robot_from_laser": scan.T_robot_from_laser.tolist()}
 
     def next_board(self, plan: str) -> dict:
         """The person puts the board at the plan's next pose."""
@@ -244,6 +260,7 @@ class LiveSite:
         for server in (self._http, self._screen):
             server.shutdown()
             server.server_close()
+        self._laser2d.stop()
         self.head_sim.close()
         self._stopping.set()
         self._worker.join(timeout=5.0)
@@ -314,6 +331,30 @@ def _place_board(site: Any, plan: str, k: int, jitter: NDArray[np.float64],
 
 
 # -- servers ------------------------------------------------------------------------------------------------
+
+LIVE_LASER_STREAM = 6  # its fault stream (scanner/sim/devices.py has 1, 2, 4, 5; the head 3)
+LIVE_LASER_HEAD = "H"  # the projection robot's one laser head, horizontal
+
+
+class LiveLaserSim(BufferedLaserSim):
+    """The site's 2-D laser in the 2-D laser's line protocol (devices/laser2d.py): one head, H; each SCAN is a
+    fresh sweep of the site's laser (site.laser_scan, its noise drawn then), as a real laser's is."""
+
+    model = "SIM-SITE 1.0"
+
+    def __init__(self, live: LiveSite) -> None:
+        super().__init__()
+        self.live = live
+
+    @property
+    def heads(self) -> tuple[str, ...]:
+        return (LIVE_LASER_HEAD,)
+
+    def take(self, head: str, tag: int) -> tuple[NDArray[np.float64], float, float]:
+        scan = self.live.call(lambda site: site.laser_scan())
+        ranges = np.where(np.isfinite(scan.ranges_m), scan.ranges_m, np.nan)
+        return ranges, float(scan.angles_rad[0]), float(scan.angles_rad[1] - scan.angles_rad[0])
+
 
 def _handler(live: LiveSite) -> type[BaseHTTPRequestHandler]:
     class Handler(BaseHTTPRequestHandler):

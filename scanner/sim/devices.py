@@ -217,35 +217,39 @@ class RobotBaseSim(TaggedLineSim):
         return [f"{tag} ERR 1 unknown command"]
 
 
-class LaserSim(TaggedLineSim):
-    """The 2-D laser's protocol (devices/laser2d.py) with the robot's two heads, scanning the simulated room from
-    where the world's robot stands (scanner.laser.simulated_head_scan)."""
+class BufferedLaserSim(TaggedLineSim):
+    """The 2-D laser's protocol (devices/laser2d.py) over a scan buffer: subclasses say which heads there are and
+    take a turn (`take`); ID?, HEADS?, SCAN and GET are answered alike for every simulated laser."""
 
     name = "laser"
+    model = "SIM 1.0"
 
-    def __init__(self, world: SimWorld, laser: LaserConfig) -> None:
-        self.world = world
-        self.laser = laser
+    def __init__(self) -> None:
         self.buffer: np.ndarray | None = None
 
     def reset(self) -> None:
         self.buffer = None
 
+    @property
+    def heads(self) -> tuple[str, ...]:
+        return HEADS
+
+    def take(self, head: str, tag: int) -> tuple[np.ndarray, float, float]:
+        """One turn of `head`: (ranges (n,) metres, NaN: no return; angle of ray 0, the step; radians)."""
+        raise NotImplementedError
+
     def dispatch(self, tag: str, command: str, args: list[str]) -> list[str]:
         if command == "ID?":
-            return [f"{tag} OK LASER2D SIM 1.0"]
+            return [f"{tag} OK LASER2D {self.model}"]
         if command == "HEADS?":
-            return [f"{tag} OK {' '.join(HEADS)}"]
+            return [f"{tag} OK {' '.join(self.heads)}"]
         if command == "SCAN":
             head, frame = args[0], int(args[1])
-            if head not in HEADS:
+            if head not in self.heads:
                 return [f"{tag} ERR 4 no head {head}"]
-            with self.world.lock:
-                pose, alignment = self.world.true_pose, self.world.alignment
-            angles, ranges = simulated_head_scan(head, pose, alignment, self.world.wall.width_m, self.laser,
-                                                 self.world.seed, frame)
+            ranges, angle0, step = self.take(head, frame)
             self.buffer = ranges_to_mm(ranges)
-            return [f"{tag} OK {len(angles)} {float(angles[0])!r} {self.laser.angular_step_rad!r}"]
+            return [f"{tag} OK {len(ranges)} {float(angle0)!r} {float(step)!r}"]
         if command == "GET":
             if self.buffer is None:
                 return [f"{tag} ERR 3 no buffer"]
@@ -257,6 +261,23 @@ class LaserSim(TaggedLineSim):
                      for k in range(first, last, RANGES_PER_LINE)]
             return [*lines, f"{tag} END {max(0, last - first)}"]
         return [f"{tag} ERR 1 unknown command"]
+
+
+class LaserSim(BufferedLaserSim):
+    """The scanning robot's 2-D laser with its two heads, scanning the simulated room from where the world's
+    robot stands (scanner.laser.simulated_head_scan)."""
+
+    def __init__(self, world: SimWorld, laser: LaserConfig) -> None:
+        super().__init__()
+        self.world = world
+        self.laser = laser
+
+    def take(self, head: str, tag: int) -> tuple[np.ndarray, float, float]:
+        with self.world.lock:
+            pose, alignment = self.world.true_pose, self.world.alignment
+        angles, ranges = simulated_head_scan(head, pose, alignment, self.world.wall.width_m, self.laser,
+                                             self.world.seed, tag)
+        return ranges, float(angles[0]), self.laser.angular_step_rad
 
 
 class SiteServers:

@@ -1,7 +1,9 @@
 """The site file: a simulated scan writes where the wall is in the room (checked against the scanning
 simulator's truth); a separate process that reads only the file finds the wall again with the projection
 robot's laser and registers as the session does in one process with the site's true room; bad site files are
-refused with one line; `arproj project --sim --head URL` drives a head served by `arproj devices serve`."""
+refused with one line; `arproj project --sim --head URL` drives a head served by `arproj devices serve`; and on
+the hardware path a wall scanned on served devices is found again by a separate `arproj project --laser URL …`
+process on the served projection robot, with the registration of `arproj project --sim` on the same site."""
 
 from __future__ import annotations
 
@@ -120,6 +122,106 @@ def test_reopened_site_registers_as_in_one_process(scanned: tuple[Path, object])
     assert reopened["truth"]["aim_error_mm"] < 4.0 * reopened["sigma_mm"]
 
 
+def _serve(urls_file: Path, *args: str) -> tuple[subprocess.Popen[str], dict[str, str]]:
+    """`arproj devices serve` in a process of its own, and its URLs once it has written them."""
+    serve = subprocess.Popen(_cli("devices", "serve", "--urls", str(urls_file), *args), env=ENV,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not urls_file.exists() and serve.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if not urls_file.exists():
+        serve.kill()
+        raise AssertionError(serve.communicate(timeout=5))
+    return serve, yaml.safe_load(urls_file.read_text())["urls"]
+
+
+def _stop(serve: subprocess.Popen[str]) -> None:
+    """Ctrl-C: the server stops cleanly (exit status 130)."""
+    if serve.poll() is None:
+        serve.send_signal(signal.SIGINT)
+    try:
+        _, err = serve.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        serve.kill()
+        serve.wait()
+        raise
+    assert serve.returncode == 130, err
+
+
+def test_site_scanned_on_devices_reopens_on_the_hardware_path(tmp_path: Path) -> None:
+    """Scan on served devices writes the site file; a separate `arproj project` on the hardware path (screen,
+    cameras, head and laser at the URLs a separate `arproj devices serve --projection` prints; the rig file)
+    finds the wall again with the laser and registers as `arproj project --sim` does in one process."""
+    serve, urls = _serve(tmp_path / "urls.yaml", "--wall", WALL, "--seed", str(SEED), "--projection",
+                         "--distance", str(DISTANCE_M))
+    try:
+        site_path, truth_file = tmp_path / "site.yaml", str(resolve_wall(WALL)[1])
+        scan = subprocess.run(_cli("scan", "--wall", WALL, "--log", str(tmp_path / "scan.db"), "--plan", "adaptive",
+                                   *(a for k in ("drives", "scanner", "laser", "base") for a in (f"--{k}", urls[k])),
+                                   "--virtual-clock", "--site", str(site_path), "--site-key", KEY),
+                              env=ENV, capture_output=True, text=True, timeout=600)
+        assert scan.returncode == 0, scan.stderr
+        site_wall = read_site_wall(site_path, KEY)
+        # the rig: the projection robot's design values (what the served site is built from, seed and layout)
+        site, _ = simulated_site_for(site_wall, SessionOptions(sim=True, seed=SEED, distance=DISTANCE_M), None)
+        with site:
+            nominal_rig(site).save(tmp_path / "rig")
+        common = ("--site", str(site_path), "--wall", KEY, "--truth", truth_file, "--rig", str(tmp_path / "rig"),
+                  "--json")
+        served = subprocess.run(_cli("project", *common, "--screen", urls["screen"], "--left", urls["camera_left"],
+                                     "--right", urls["camera_right"], "--head", urls["head"],
+                                     "--laser", urls["projection_laser"]),
+                                env=ENV, capture_output=True, text=True, timeout=600)
+        assert served.returncode == 0, served.stderr
+    finally:
+        _stop(serve)
+    one = subprocess.run(_cli("project", "--sim", "--seed", str(SEED), "--distance", str(DISTANCE_M), *common),
+                         env=ENV, capture_output=True, text=True, timeout=600)
+    assert one.returncode == 0, one.stderr
+    hardware, in_one = json.loads(served.stdout), json.loads(one.stdout)
+    reg, ref = hardware["registration"], in_one["registration"]
+    for r in (reg, ref):
+        assert "laser fix in the site's room (left and right side wall)" in r["source"], r["source"]
+    # the pattern was seen through the served cameras: the closed loop found its marks
+    assert hardware["cycles"][0]["closed_loop_mm"]["seen"] >= 8, hardware["cycles"]
+    # Two estimates of the same robot pose from independent noise (the laser's returns, the camera pictures,
+    # which the served path also JPEG-compresses and the laser rounds to mm): their registration σ on the
+    # wall bounds the difference, 4σ of two independent estimates; each against the simulated truth the same
+    sigma_reg, sigma_ref = reg["sigma_mm"] / 1000, ref["sigma_mm"] / 1000
+    tolerance = 4.0 * np.hypot(sigma_reg, sigma_ref)
+    for name in ("T_wall_from_robot", "T_wall_from_projector"):
+        T_hw, T_one = np.asarray(reg[name]), np.asarray(ref[name])
+        assert np.linalg.norm(T_hw[:3, 3] - T_one[:3, 3]) < tolerance, (name, T_hw[:3, 3] - T_one[:3, 3])
+        assert rotation_angle_deg(T_hw[:3, :3], T_one[:3, :3]) < 0.2, name
+    truth = np.asarray(ref["truth"]["T_wall_from_robot"])
+    assert np.linalg.norm(np.asarray(reg["T_wall_from_robot"])[:3, 3] - truth[:3, 3]) < 4.0 * sigma_reg
+    aim_difference = np.linalg.norm(np.subtract(reg["aim_xy_m"], ref["aim_xy_m"]))
+    assert aim_difference < tolerance, aim_difference
+
+
+def test_hardware_site_sessions_refuse_what_they_cannot_do(scanned: tuple[Path, object], tmp_path: Path) -> None:
+    """Without the laser, with a rig that does not place it, or --laser with --sim: one line, exit status 2,
+    before any device is opened."""
+    site_path, in_memory = scanned
+    site, _ = simulated_site_for(in_memory, SessionOptions(sim=True, seed=SEED), None)
+    with site:
+        rig = nominal_rig(site)
+    rig.save(tmp_path / "rig")
+    del rig.poses["T_robot_from_laser"]
+    rig.save(tmp_path / "rig_without_laser")
+    common = ("project", "--site", str(site_path), "--wall", KEY, "--truth", str(resolve_wall(WALL)[1]))
+    for args, named in (
+            (("--rig", str(tmp_path / "rig")), "needs the projection robot's 2-D laser"),
+            (("--rig", str(tmp_path / "rig_without_laser"), "--laser", "socket://127.0.0.1:9"),
+             "(poses: T_robot_from_laser)"),
+            (("--sim", "--laser", "socket://127.0.0.1:9"), "with --sim the simulated site's laser is read"),
+            (("--rig", str(tmp_path / "rig"), "--screen", "beamer"), "--screen 'beamer' is neither")):
+        done = subprocess.run(_cli(*common, *args), env=ENV, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 2, done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and named in lines[0], lines
+
+
 def _project(site: Path, key: str = KEY) -> subprocess.CompletedProcess[str]:
     return subprocess.run(_cli("project", "--sim", "--site", str(site), "--wall", key, "--truth",
                                str(resolve_wall(WALL)[1])), env=ENV, capture_output=True, text=True, timeout=300)
@@ -173,16 +275,9 @@ def test_unknown_wall_and_other_files_refused(scanned: tuple[Path, object], tmp_
 
 
 def test_project_on_a_head_served_by_devices_serve(tmp_path: Path) -> None:
-    urls_file = tmp_path / "urls.yaml"
-    serve = subprocess.Popen(_cli("devices", "serve", "--wall", "small_test_wall", "--urls", str(urls_file)),
-                             env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    serve, urls = _serve(tmp_path / "urls.yaml", "--wall", "small_test_wall")
     try:
-        deadline = time.monotonic() + 60
-        while not urls_file.exists() and serve.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert urls_file.exists(), serve.communicate(timeout=5)
-        head_url = yaml.safe_load(urls_file.read_text())["urls"]["head"]
-        done = subprocess.run(_cli("project", "--sim", "--head", head_url, "--truth",
+        done = subprocess.run(_cli("project", "--sim", "--head", urls["head"], "--truth",
                                    str(resolve_wall("demo_brick_wall")[1]), "--json"),
                               env=ENV, capture_output=True, text=True, timeout=600)
         assert done.returncode == 0, done.stderr
@@ -190,10 +285,5 @@ def test_project_on_a_head_served_by_devices_serve(tmp_path: Path) -> None:
         assert result["cycles"][0]["show_map"], result["cycles"]
         truth = result["registration"]["truth"]
         assert truth["aim_error_mm"] < 4.0 * result["registration"]["sigma_mm"], truth
-        serve.send_signal(signal.SIGINT)
-        _, err = serve.communicate(timeout=30)
-        assert serve.returncode == 130, err
     finally:
-        if serve.poll() is None:
-            serve.kill()
-            serve.wait()
+        _stop(serve)

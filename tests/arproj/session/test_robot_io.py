@@ -1,4 +1,5 @@
-"""Hardware cameras through OpenCV (a video file stands in for a camera) and the wall-prior file."""
+"""Hardware cameras through OpenCV (a video file stands in for a camera), the wall-prior file and the
+robot's 2-D laser through its line protocol."""
 
 import cv2
 import numpy as np
@@ -48,3 +49,35 @@ def test_wall_prior_file(tmp_path):
         read_wall_prior(bad)
     with pytest.raises(InputError, match="no such wall-prior file"):
         read_wall_prior(tmp_path / "missing.yaml")
+
+
+@pytest.mark.gl
+def test_device_laser_reads_the_sites_laser_through_the_laser_protocol():
+    """DeviceLaser (devices/laser2d.py on a socket:// URL) gives the robot-frame returns the site's own laser
+    gives: ray for ray the same range to within the two sweeps' noise (σ 1 cm each, mm on the wire)."""
+    from arproj.session.robot_io import DeviceLaser
+    from arproj.sim.live import serve_live_site
+    from devices.errors import DeviceError
+
+    with serve_live_site(seed=0, small=True) as live:
+        doc = live.laser_scan()
+        T = np.asarray(doc["T_robot_from_laser"])
+        laser = DeviceLaser(live.urls.laser2d, T)
+        try:
+            assert laser.head == "H"
+            points = laser.points()
+            np.testing.assert_allclose(laser.origin, T[:3, 3])
+            with pytest.raises(DeviceError, match="'SCAN V 1' -> ERR 4 no head V"):  # the one head it has
+                laser.laser.scan("V", 1)
+        finally:
+            laser.close()
+        angles = np.asarray(doc["angles_rad"])
+        ranges = np.array([np.nan if r is None else r for r in doc["ranges_m"]])
+        rel = points[:, :2] - T[:2, 3]
+        assert np.allclose(points[:, 2], T[2, 3])  # the laser's plane, at its height on the robot
+        k = np.rint((np.arctan2(rel[:, 1], rel[:, 0]) - angles[0]) / (angles[1] - angles[0])).astype(int)
+        difference = np.abs(np.hypot(rel[:, 0], rel[:, 1]) - ranges[k])
+        ok = np.isfinite(difference)
+        assert ok.sum() > 0.9 * len(angles)
+        # 5σ of the difference of two sweeps (σ 1 cm each); the few outlier beams (0.5 % a sweep) aside
+        assert np.mean(difference[ok] < 5 * np.hypot(0.01, 0.01)) > 0.98
