@@ -333,6 +333,7 @@ def measure_marks(marks_xy: NDArray[np.float64], uv_left: NDArray[np.float64], u
 LASER_NEAR_WALL_M = 0.08     # laser returns this close to the estimated wall plane belong to it
 LASER_WINDOW_M = 1.5         # … and this far along the wall from the projected area
 LASER_MIN_POINTS = 20
+LASER_SEARCH_M = 0.6          # no wall return near the plane: the nearest returns within this say by how much
 
 
 def laser_plane_offset_m(T_wall_from_robot: NDArray[np.float64], laser_points_robot: NDArray[np.float64],
@@ -341,7 +342,9 @@ def laser_plane_offset_m(T_wall_from_robot: NDArray[np.float64], laser_points_ro
     near the projected area: the offset at centre_x plus the slope over LASER_WINDOW_M (robust line fit).
 
     Camera-measured plane and laser both live in the robot frame, so a camera mount that differs from the rig
-    file (or a bumped camera) shows up here; NaN when the laser does not see this wall.
+    file (or a bumped camera) shows up here. When the laser sees something along the wall but nothing near the
+    plane — the cameras measured a board or sheet before the wall as the wall — the median distance of the
+    returns within LASER_SEARCH_M behind or before it is the disagreement; NaN when the laser sees nothing there.
     """
     p = np.asarray(laser_points_robot, dtype=np.float64)
     if p.shape[1] == 2:
@@ -349,7 +352,8 @@ def laser_plane_offset_m(T_wall_from_robot: NDArray[np.float64], laser_points_ro
     w = transform_points(T_wall_from_robot, p)
     near = (np.abs(w[:, 2]) < LASER_NEAR_WALL_M) & (np.abs(w[:, 0] - centre_x) < LASER_WINDOW_M)
     if near.sum() < LASER_MIN_POINTS:
-        return float("nan")
+        around = (np.abs(w[:, 2]) < LASER_SEARCH_M) & (np.abs(w[:, 0] - centre_x) < LASER_WINDOW_M)
+        return float(np.median(np.abs(w[around, 2]))) if around.sum() >= LASER_MIN_POINTS else float("nan")
     x, z = w[near, 0] - centre_x, w[near, 2]
 
     def refit(keep: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:

@@ -90,3 +90,21 @@ def test_the_shown_region_shrinks_with_what_the_loop_measures_and_never_grows():
     gone, s_gone = registration.checked_region(drawn, 0.0095, 0.010)
     assert not gone.usable and s_gone == pytest.approx(sigma.max())  # too little left: the gate refuses
     assert not gate.decide(_good(pose_sigma_m=s_gone, closed_loop_errors_m=np.full(30, 0.0095))).show_map
+
+
+def test_a_plane_measured_before_the_wall_is_a_laser_disagreement_not_a_missing_check():
+    from arproj.session import registration
+    from geometry.poses import make_pose
+
+    # the laser's returns from a wall at z = 0 (wall frame = robot frame here), 1 cm noise
+    rng = np.random.default_rng(3)
+    x = np.linspace(-1.4, 1.4, 200)
+    laser = np.column_stack([x + 1.5, np.zeros_like(x), rng.normal(0, 0.01, len(x))])
+    assert registration.laser_plane_offset_m(np.eye(4), laser, 1.5) < 0.006
+    # the cameras took a board 14 cm before the wall for the wall: no return lies near that plane
+    board = make_pose(None, [0.0, 0.0, -0.14])
+    offset = registration.laser_plane_offset_m(board, laser, 1.5)
+    assert offset == pytest.approx(0.14, abs=0.01)
+    assert not gate.decide(_good(laser_plane_offset_m=offset)).show_map
+    far = make_pose(None, [0.0, 0.0, -2.0])  # nothing within reach of the plane at all: no laser check
+    assert np.isnan(registration.laser_plane_offset_m(far, laser, 1.5))
