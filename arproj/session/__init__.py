@@ -11,5 +11,5 @@ Modules:
     robot_io      the simulated robot (site + Pelco-D head simulator) and real hardware behind one interface
     output        beamer window (fullscreen, own process), PNG sequence, memory
     evaluate      ground truth of the registration on the simulated site (benchmark, tests)
-    scenarios     feature-level degraded scenarios for the safety gate (benchmark, tests)
+    scenarios     degraded scenes rendered on the simulated site for the safety gate (benchmark, tests)
 """

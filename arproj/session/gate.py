@@ -26,7 +26,7 @@ from arproj.session import tolerances as tol
 
 HEAD_COMMAND_TOLERANCE_DEG = 0.05
 ROBOT_MOTION_TOLERANCE_M = 0.003   # at the wall: translation plus heading change × distance
-STEREO_RESIDUAL_MAX_PX = 1.0       # RMS reprojection residual of triangulated check marks
+STEREO_RESIDUAL_MAX_PX = 1.0       # reprojection residual of triangulated check marks (root median square)
 MIN_VISIBLE_FRACTION = 0.3         # fewer check marks seen than this fraction: pattern lost
 LASER_PLANE_TOLERANCE_M = 0.006    # laser and cameras disagree about the wall by more: wrong rig / moved camera
 SCAN_MATCH_NEIGHBOURS = 8

@@ -8,6 +8,8 @@ room corners and other non-planar walls land right too.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
@@ -53,9 +55,17 @@ class MapProjector:
     def __init__(self, wall_map: WallMap, projector: Intrinsics, ctx: object | None = None) -> None:
         self.wall_map = wall_map
         self.projector = projector
-        self._renderer = MeshRenderer(ctx=ctx)  # type: ignore[arg-type]
-        self._key: tuple | None = None
-        self.raster: overlays.WallRaster | None = None
+        # The map and the closed loop's check marks each keep their own renderer (mesh and texture): every
+        # update shows marks, then the map, and redrawing the map's overlays each time costs seconds.
+        self._renderers = {"map": MeshRenderer(ctx=ctx), "marks": MeshRenderer(ctx=ctx)}  # type: ignore[arg-type]
+        self._keys: dict[str, tuple | None] = {"map": None, "marks": None}
+        self._rasters: dict[str, overlays.WallRaster | None] = {"map": None, "marks": None}
+        self._active = "map"
+
+    @property
+    def raster(self) -> overlays.WallRaster | None:
+        """The wall raster of what render() draws now (the map's or the check marks')."""
+        return self._rasters[self._active]
 
     def __enter__(self) -> MapProjector:
         return self
@@ -64,7 +74,16 @@ class MapProjector:
         self.release()
 
     def release(self) -> None:
-        self._renderer.release()
+        for renderer in self._renderers.values():
+            renderer.release()
+
+    def _show(self, which: str, key: tuple, make: Callable[[], overlays.WallRaster]) -> None:
+        self._active = which
+        if key == self._keys[which]:
+            return
+        raster = make()
+        self._renderers[which].set_mesh(textured_mesh(self.wall_map, raster))
+        self._rasters[which], self._keys[which] = raster, key
 
     def set_overlays(self, registration_sigma_m: float, drill_xy: ArrayLike | None = None,
                      show_zones: bool = True, clip: NDArray[np.float64] | None = None) -> None:
@@ -73,25 +92,17 @@ class MapProjector:
         sigma_q = round(float(registration_sigma_m) / SIGMA_QUANTUM_M) * SIGMA_QUANTUM_M
         drill = None if drill_xy is None else tuple(np.round(np.asarray(drill_xy, dtype=float), 4))
         clip_key = None if clip is None else np.asarray(clip).round(3).tobytes()
-        key = ("map", sigma_q, drill, show_zones, clip_key)
-        if key == self._key:
-            return
-        self.raster = overlays.draw_map(self.wall_map, sigma_q, None if drill is None else np.array(drill),
-                                        show_zones, clip=clip)
-        self._renderer.set_mesh(textured_mesh(self.wall_map, self.raster))
-        self._key = key
+        self._show("map", ("map", sigma_q, drill, show_zones, clip_key),
+                   lambda: overlays.draw_map(self.wall_map, sigma_q, None if drill is None else np.array(drill),
+                                             show_zones, clip=clip))
 
     def set_check_marks(self, marks_xy: NDArray[np.float64],
                         radius_m: float | NDArray[np.float64] = CHECK_MARK_RADIUS_M) -> None:
         key = ("marks", np.asarray(marks_xy).round(5).tobytes(), np.asarray(radius_m).round(5).tobytes())
-        if key == self._key:
-            return
-        self.raster = check_mark_raster(self.wall_map, marks_xy, radius_m)
-        self._renderer.set_mesh(textured_mesh(self.wall_map, self.raster))
-        self._key = key
+        self._show("marks", key, lambda: check_mark_raster(self.wall_map, marks_xy, radius_m))
 
     def render(self, T_wall_from_projector: ArrayLike) -> NDArray[np.uint8]:
         """The pre-warped frame (h, w, 3) uint8 RGB for the projector at T_wall_from_projector."""
-        if self._key is None:
+        if self._keys[self._active] is None:
             self.set_overlays(tol.DEFAULT_MAP_SIGMA_M)
-        return self._renderer.render(self.projector, T_wall_from_projector).color
+        return self._renderers[self._active].render(self.projector, T_wall_from_projector).color

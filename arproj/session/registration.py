@@ -138,32 +138,53 @@ def inside_polygon(points_xy: NDArray[np.float64], polygon: NDArray[np.float64])
 @dataclass
 class TrustedRegion:
     """Where the map may be drawn: polygon (k, 2) wall metres, or None for everywhere it lands; sigma_m the
-    largest expected 1σ error inside; share the fraction of the drawn area's sample points inside."""
+    largest expected 1σ error inside; share the fraction of the drawn area's sample points inside. points_xy
+    and point_sigma_m: those samples and their 1σ (to redraw the region after the closed loop);
+    checked_polygon: where the closed loop puts its marks (the region drawn with the reserve; None: all)."""
 
     polygon: NDArray[np.float64] | None
     sigma_m: float
     share: float
+    points_xy: NDArray[np.float64] | None = None
+    point_sigma_m: NDArray[np.float64] | None = None
+    checked_polygon: NDArray[np.float64] | None = None
 
     @property
     def usable(self) -> bool:
         return self.share >= tol.MIN_TRUSTED_SHARE
 
 
-def trusted_region(points_xy: NDArray[np.float64], sigma_m: NDArray[np.float64], tolerance_m: float
-                   ) -> TrustedRegion:
-    """The part of the drawn area where the registration is within tolerance (95 %, with a reserve for what
-    the closed loop may add): the convex hull of the trusted sample points (the error grows smoothly away
-    from the aim point, so that region is convex in practice)."""
+def checked_region(region: TrustedRegion, measured_m: float, tolerance_m: float) -> tuple[TrustedRegion, float]:
+    """The region once the closed loop and the laser have measured (measured_m: the loop's worst mark plus the
+    robot's motion): where the pose's 95 % error plus that stays within the tolerance, and the 1σ the gate
+    takes (the region's largest, or the whole drawn area's when too little is left). Smaller than the region
+    drawn with the reserve only when measured_m exceeds the reserve, and never larger (the marks were put
+    there)."""
+    if region.points_xy is None or region.point_sigma_m is None:
+        return region, region.sigma_m
+    reserve = max(float(measured_m), tol.CLOSED_LOOP_RESERVE_M) if np.isfinite(measured_m) else np.inf
+    checked = trusted_region(region.points_xy, region.point_sigma_m, tolerance_m, reserve_m=reserve)
+    checked.checked_polygon = region.checked_polygon
+    return checked, checked.sigma_m if checked.usable else float(region.point_sigma_m.max())
+
+
+def trusted_region(points_xy: NDArray[np.float64], sigma_m: NDArray[np.float64], tolerance_m: float,
+                   reserve_m: float = tol.CLOSED_LOOP_RESERVE_M) -> TrustedRegion:
+    """The part of the drawn area where the registration is within tolerance (95 %, with reserve_m left for
+    what the closed loop measures): the convex hull of the trusted sample points (the error grows smoothly
+    away from the aim point, so that region is convex in practice)."""
+    points_xy = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    sigma_m = np.asarray(sigma_m, dtype=np.float64)
     if len(sigma_m) == 0:
         return TrustedRegion(None, float("inf"), 0.0)
-    ok = tol.Z95 * sigma_m <= tol.TRUSTED_FRACTION_OF_TOLERANCE * tolerance_m
+    ok = tol.Z95 * sigma_m + reserve_m <= tolerance_m
     share = float(ok.mean())
     if ok.all():
-        return TrustedRegion(None, float(sigma_m.max()), 1.0)
+        return TrustedRegion(None, float(sigma_m.max()), 1.0, points_xy, sigma_m)
     if ok.sum() < 3:
-        return TrustedRegion(None, float(sigma_m.max()), share)
+        return TrustedRegion(None, float(sigma_m.max()), share, points_xy, sigma_m)
     hull = cv2.convexHull(points_xy[ok].astype(np.float32)).reshape(-1, 2).astype(np.float64)
-    return TrustedRegion(hull, float(sigma_m[ok].max()), share)
+    return TrustedRegion(hull, float(sigma_m[ok].max()), share, points_xy, sigma_m, hull)
 
 
 # -- closed loop --------------------------------------------------------------------------------------------
@@ -229,7 +250,7 @@ def find_marks(image: NDArray[np.uint8], predicted_uv: NDArray[np.float64],
 class ClosedLoopResult:
     """errors_xy: (k, 2) metres, where each used mark landed minus where it should (wall x, y); seen: (n,)
     marks found in both cameras and kept; offset_xy: mean error (the correction applied when small);
-    residual_px: stereo RMS residual; off_plane_m: median left/right disagreement on the wall."""
+    residual_px: stereo residual (root median square); off_plane_m: median left/right disagreement on the wall."""
 
     marks_xy: NDArray[np.float64]
     errors_xy: NDArray[np.float64]
@@ -282,14 +303,17 @@ def measure_marks(marks_xy: NDArray[np.float64], uv_left: NDArray[np.float64], u
     on an oblique wall that is far more precise in the plane than free stereo triangulation, whose depth
     error slides along the wall by tan(incidence). The mean of both cameras is the landing point; a mark
     whose stereo reprojection residual or left/right disagreement is too large was mis-detected and is
-    dropped. residual_px (RMS over all marks seen by both cameras) checks the rig: a wrong rig file makes
-    every mark's rays miss each other.
+    dropped. residual_px (root median square over all marks seen by both cameras) checks the rig: a wrong rig
+    file makes every mark's rays miss each other.
     """
     seen = np.all(np.isfinite(uv_left), axis=1) & np.all(np.isfinite(uv_right), axis=1)
     points = triangulate(camera_left, camera_right, T_right_from_left, uv_left[seen], uv_right[seen])
     residual = reprojection_residuals(camera_left, camera_right, T_right_from_left, points, uv_left[seen],
                                       uv_right[seen])
-    rms = float(np.sqrt(np.mean(residual ** 2))) if len(residual) else float("nan")
+    # The rig check: a wrong rig makes every mark's rays miss each other, so the median mark tells; the RMS
+    # over all of them would let a few marks on a person in the beam (found off their predicted spot, their
+    # two views not meeting) pass for a wrong rig, keep every mark and warn for a fine map.
+    rms = float(np.sqrt(np.median(residual ** 2))) if len(residual) else float("nan")
     T_wall_from_right = T_wall_from_camera_left @ invert(T_right_from_left)
     xy_l = _ray_plane_xy(camera_left, uv_left[seen], T_wall_from_camera_left)
     xy_r = _ray_plane_xy(camera_right, uv_right[seen], T_wall_from_right)
@@ -309,6 +333,7 @@ def measure_marks(marks_xy: NDArray[np.float64], uv_left: NDArray[np.float64], u
 LASER_NEAR_WALL_M = 0.08     # laser returns this close to the estimated wall plane belong to it
 LASER_WINDOW_M = 1.5         # … and this far along the wall from the projected area
 LASER_MIN_POINTS = 20
+LASER_SEARCH_M = 0.6          # no wall return near the plane: the nearest returns within this say by how much
 
 
 def laser_plane_offset_m(T_wall_from_robot: NDArray[np.float64], laser_points_robot: NDArray[np.float64],
@@ -317,7 +342,9 @@ def laser_plane_offset_m(T_wall_from_robot: NDArray[np.float64], laser_points_ro
     near the projected area: the offset at centre_x plus the slope over LASER_WINDOW_M (robust line fit).
 
     Camera-measured plane and laser both live in the robot frame, so a camera mount that differs from the rig
-    file (or a bumped camera) shows up here; NaN when the laser does not see this wall.
+    file (or a bumped camera) shows up here. When the laser sees something along the wall but nothing near the
+    plane — the cameras measured a board or sheet before the wall as the wall — the median distance of the
+    returns within LASER_SEARCH_M behind or before it is the disagreement; NaN when the laser sees nothing there.
     """
     p = np.asarray(laser_points_robot, dtype=np.float64)
     if p.shape[1] == 2:
@@ -325,7 +352,8 @@ def laser_plane_offset_m(T_wall_from_robot: NDArray[np.float64], laser_points_ro
     w = transform_points(T_wall_from_robot, p)
     near = (np.abs(w[:, 2]) < LASER_NEAR_WALL_M) & (np.abs(w[:, 0] - centre_x) < LASER_WINDOW_M)
     if near.sum() < LASER_MIN_POINTS:
-        return float("nan")
+        around = (np.abs(w[:, 2]) < LASER_SEARCH_M) & (np.abs(w[:, 0] - centre_x) < LASER_WINDOW_M)
+        return float(np.median(np.abs(w[around, 2]))) if around.sum() >= LASER_MIN_POINTS else float("nan")
     x, z = w[near, 0] - centre_x, w[near, 2]
 
     def refit(keep: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:

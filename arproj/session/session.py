@@ -287,10 +287,11 @@ class ProjectionSession:
         T_wall_uncorrected = make_pose(None, [-reg.correction_xy[0], -reg.correction_xy[1], 0.0]) \
             @ reg.T_wall_from_projector
         marks = registration.choose_marks(T_wall_uncorrected, self.projector_intr, self.wall_map.extent)
-        if reg.trusted is not None and reg.trusted.polygon is not None:  # verify what is shown, not the rest
+        checked = None if reg.trusted is None else reg.trusted.checked_polygon
+        if checked is not None:  # verify what may be shown, not the rest
             dense = registration.choose_marks(T_wall_uncorrected, self.projector_intr, self.wall_map.extent,
                                               grid=(16, 10))
-            dense = dense[registration.inside_polygon(dense, reg.trusted.polygon)]
+            dense = dense[registration.inside_polygon(dense, checked)]
             step = max(1, int(np.ceil(len(dense) / CLOSED_LOOP_MARKS)))
             marks = dense[::step]  # as many marks as usual, spread over the trusted part
         if len(marks) < tol.CLOSED_LOOP_MIN_FEATURES:
@@ -339,6 +340,11 @@ class ProjectionSession:
             ev.closed_loop_expected = len(reg.loop.seen)
             ev.closed_loop_errors_m = np.linalg.norm(reg.loop.errors_xy - reg.correction_xy, axis=1)
             ev.stereo_residual_px = reg.loop.residual_px if reg.loop.seen.any() else None
+        if reg.trusted is not None and ev.closed_loop_errors_m is not None and len(ev.closed_loop_errors_m):
+            # the map only where the pose's 95 % error plus what the loop and the laser measured hold
+            reg.trusted, reg.sigma_m = registration.checked_region(
+                reg.trusted, float(np.max(ev.closed_loop_errors_m)) + ev.robot_motion_m, self.tolerance_m)
+            ev.pose_sigma_m = reg.sigma_m
         return ev
 
     def decide(self) -> gate.GateDecision:
@@ -362,8 +368,9 @@ class ProjectionSession:
             lines.append(f"drill: {self.drill_check(self.drill_xy).message}")
         return overlays.draw_legend(frame, lines)
 
-    def update(self, force: bool = False) -> gate.GateDecision:
-        """One cycle: re-estimate when needed, verify, decide, show. Returns the gate's decision."""
+    def update(self, force: bool = False, show: bool = True) -> gate.GateDecision:
+        """One cycle: re-estimate when needed, verify, decide, show (show=False: decide only, the frame not
+        drawn — the benchmark's degraded scenes judge the decision). Returns the gate's decision."""
         needs_estimate = force or self.registration is None
         if not needs_estimate:
             ev = self.evidence()
@@ -381,8 +388,9 @@ class ProjectionSession:
                 if self.estimate() is not None:
                     self.verify()
         decision = self.decide()
-        self.last_frame = self.render_frame(decision)
-        self.robot.show(self.last_frame)
+        if show:
+            self.last_frame = self.render_frame(decision)
+            self.robot.show(self.last_frame)
         if not decision.show_map:
             self.log.append("WARNING shown: " + "; ".join(decision.reasons))
         return decision

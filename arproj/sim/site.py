@@ -558,7 +558,7 @@ class Site:
         model = self._camera(camera)
         T = self.T_room_from(camera)
         key = (camera, T.tobytes(), self.T_room_from("projector").tobytes(), tuple(s.serial for s in surfaces),
-               self.projector_focus_m)
+               self.projector_focus_m, self.room.ambient_lux)
         for k, view in self._views:
             if k == key:
                 return view

@@ -73,3 +73,38 @@ def test_scan_matching_measures_the_robots_motion(move):
     assert m.dx == pytest.approx(move[0], abs=0.004)
     assert m.dy == pytest.approx(move[1], abs=0.0025)
     assert np.degrees(m.dtheta_rad) == pytest.approx(move[2], abs=0.09)
+
+
+def test_the_shown_region_shrinks_with_what_the_loop_measures_and_never_grows():
+    from arproj.session import registration
+
+    grid = np.array([[x, y] for x in np.linspace(0.0, 3.0, 31) for y in np.linspace(0.0, 1.0, 6)])
+    sigma = 0.0015 + 0.0012 * grid[:, 0]  # 1σ growing along the wall: Z95·σ from 2.9 mm to 10 mm
+    drawn = registration.trusted_region(grid, sigma, 0.010)
+    assert drawn.checked_polygon is not None and 0.5 < drawn.share < 1.0  # where Z95·σ + reserve ≤ 10 mm
+    same, s_same = registration.checked_region(drawn, tol.CLOSED_LOOP_RESERVE_M / 2, 0.010)
+    assert same.share == drawn.share and s_same == pytest.approx(drawn.sigma_m)
+    worse, s_worse = registration.checked_region(drawn, 0.004, 0.010)
+    assert worse.share < drawn.share and tol.Z95 * s_worse + 0.004 <= 0.010  # the gate's bound holds inside
+    assert np.array_equal(worse.checked_polygon, drawn.checked_polygon)  # the marks stay where they were put
+    gone, s_gone = registration.checked_region(drawn, 0.0095, 0.010)
+    assert not gone.usable and s_gone == pytest.approx(sigma.max())  # too little left: the gate refuses
+    assert not gate.decide(_good(pose_sigma_m=s_gone, closed_loop_errors_m=np.full(30, 0.0095))).show_map
+
+
+def test_a_plane_measured_before_the_wall_is_a_laser_disagreement_not_a_missing_check():
+    from arproj.session import registration
+    from geometry.poses import make_pose
+
+    # the laser's returns from a wall at z = 0 (wall frame = robot frame here), 1 cm noise
+    rng = np.random.default_rng(3)
+    x = np.linspace(-1.4, 1.4, 200)
+    laser = np.column_stack([x + 1.5, np.zeros_like(x), rng.normal(0, 0.01, len(x))])
+    assert registration.laser_plane_offset_m(np.eye(4), laser, 1.5) < 0.006
+    # the cameras took a board 14 cm before the wall for the wall: no return lies near that plane
+    board = make_pose(None, [0.0, 0.0, -0.14])
+    offset = registration.laser_plane_offset_m(board, laser, 1.5)
+    assert offset == pytest.approx(0.14, abs=0.01)
+    assert not gate.decide(_good(laser_plane_offset_m=offset)).show_map
+    far = make_pose(None, [0.0, 0.0, -2.0])  # nothing within reach of the plane at all: no laser check
+    assert np.isnan(registration.laser_plane_offset_m(far, laser, 1.5))

@@ -136,39 +136,3 @@ def test_dead_head_shows_the_warning_and_the_session_stays_up(running):
     finally:
         head_sim.faults.dead = False
         session.robot.head.timeout_s = 0.1
-
-
-def test_degraded_scenarios_never_show_a_wrong_map(running):
-    """Feature-level scenarios on the real registration: strong faults are warned, none is shown wrong."""
-    from arproj.session import registration, scenarios
-
-    site, _, session, _, _ = running
-    session.update()
-    reg = session.registration
-    rig = session.rig
-    belief = scenarios.Belief(rig, reg.T_wall_from_robot, reg.T_wall_from_projector, reg.sigma_m, reg.distance_m)
-    truth = scenarios.truth_of(site, 0)
-    marks = registration.choose_marks(reg.T_wall_from_projector, session.projector_intr, session.wall_map.extent)
-    features = marks
-    rng = np.random.default_rng(11)
-    calm = scenarios.evaluate(belief, truth, marks, features, rng, "none", "-")
-    assert calm.show_map and calm.true_max_m < 0.005
-    outcomes = []
-    for slip in (0.05, 0.3, 0.6):
-        angles = site.head_angles_true_deg + np.array([slip, -slip / 2, 0.0])
-        slipped = scenarios.Truth(truth.T_wall_from_robot, site.head.T_robot_from_projector(angles),
-                                  truth.projector, truth.camera_left, truth.camera_right,
-                                  truth.T_robot_from_camera_left, truth.T_camera_right_from_camera_left)
-        outcomes.append(scenarios.evaluate(belief, slipped, marks, features, rng, "head slipped", f"{slip}"))
-    for variant in range(4):
-        wrong_rig, what = scenarios.perturbed_rig(rig, variant, rng)
-        wrong_belief = scenarios.Belief(wrong_rig, belief.T_wall_from_robot, belief.T_wall_from_projector,
-                                        belief.sigma_m, belief.distance_m)
-        outcomes.append(scenarios.evaluate(wrong_belief, truth, marks, features, rng, "wrong rig", what,
-                                           laser_points=site.laser_scan().points_robot()))
-    occluded = scenarios.evaluate(belief, truth, marks, features, rng, "occluded", "90 %",
-                                  occluder=(-10.0, -10.0, 10.0, 10.0))
-    assert not occluded.show_map and any("pattern lost" in r for r in occluded.reasons)
-    assert not any(o.unsafe for o in outcomes), [(o.kind, o.magnitude, o.true_max_m) for o in outcomes]
-    big_slip = outcomes[2]
-    assert big_slip.true_max_m > 0.01 and not big_slip.show_map
