@@ -27,6 +27,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import t as student_t
 
 from calibration.boards import Board, BoardView, detect, read_gray
 from calibration.bundle import Observation, bundle_adjust
@@ -53,6 +54,11 @@ INVERSE_MAP_RADIUS_PX = 6.0  # projector-pixel radius of the patch used to map p
 MIN_PROJECTOR_POSES = 3
 MIN_PLANE_SPREAD_DEG = 10.0  # the wall's normal must differ by this much between some poses
 MIN_VIEWS_FOR_K3 = 10
+# A fit outside these is no projector (a focal length collapsed to 0, say): refused, not written. Throw ratios of
+# real projectors give focal lengths of about 0.5-5 image widths.
+PROJECTOR_FOCAL_RANGE_WIDTHS = (0.25, 10.0)
+PROJECTOR_MAX_ASPECT = 1.2  # fx/fy (square projector pixels: about 1)
+PROJECTOR_MAX_RMS_PX = 2.0  # decoded Gray code reprojects to about a tenth of this
 PROJECTOR_MODEL = "k1k2"  # lens shift puts image corners far off-axis (r ≈ 0.5): k2 matters; p, k3 overfit
 
 Tracker = Callable[[Iterable, str, int], Iterator]
@@ -365,10 +371,27 @@ def calibrate_inverse_camera(points_3d: list[NDArray[np.float64]], projector_pix
     observations = [Observation(0, i, np.asarray(u, np.float64), q)
                     for i, (q, u) in enumerate(zip(local, projector_pixels, strict=True))]
     fit = bundle_adjust([intr0], [model], observations, poses0)
+    check_projector_fit(fit.cameras[0], fit.rms_px)
     T_proj_from_ref = [T @ invert(F) for T, F in zip(fit.T_0_from_view, frames, strict=True)]
     per_pose = [float(np.sqrt(np.mean(np.sum(r ** 2, axis=1)))) for r in fit.residuals]
     return ProjectorCalibration(fit.cameras[0], fit.rms_px, T_proj_from_ref, per_pose_rms_px=per_pose,
                                 sources=list(sources or []), projector_sigma=fit.intrinsics_sigma[0])
+
+
+def check_projector_fit(projector: Intrinsics, rms_px: float) -> None:
+    """InputError when a fitted projector is degenerate: the captures cannot have shown the patterns in order."""
+    lo, hi = PROJECTOR_FOCAL_RANGE_WIDTHS
+    w = projector.width
+    problems = [f"{k} = {v:.1f} px is not {lo:g}-{hi:g} image widths" for k, v in
+                (("fx", projector.fx), ("fy", projector.fy)) if not lo * w <= v <= hi * w]
+    if not problems and max(projector.fx / projector.fy, projector.fy / projector.fx) > PROJECTOR_MAX_ASPECT:
+        problems.append(f"fx/fy = {projector.fx / projector.fy:.2f} (square pixels: about 1)")
+    if not rms_px <= PROJECTOR_MAX_RMS_PX:
+        problems.append(f"the points reproject to {rms_px:.2f} px RMS (limit {PROJECTOR_MAX_RMS_PX:g})")
+    if problems:
+        raise InputError("the projector fit is degenerate (" + "; ".join(problems) + "), nothing written",
+                         "the captured pictures do not match the patterns shown: check that the cameras see the "
+                         "projected image and each capture shows its pattern (raise --settle), then calibrate again")
 
 
 # --- stereo path ---------------------------------------------------------------------------------------------
@@ -382,19 +405,87 @@ def projector_grid(projector_size: tuple[int, int], step_px: int) -> NDArray[np.
     return np.column_stack([gx.ravel(), gy.ravel()])
 
 
-def wall_points_from_stereo(decoded_left: NDArray[np.float64], decoded_right: NDArray[np.float64],
-                            left: Intrinsics, right: Intrinsics, T_right_from_left: NDArray[np.float64],
-                            projector_size: tuple[int, int], step_px: int = 32
-                            ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(3-D points (m, 3) in the left camera frame, projector pixels (m, 2)) for one projected Gray code."""
+def stereo_correspondences(decoded_left: NDArray[np.float64], decoded_right: NDArray[np.float64],
+                           projector_size: tuple[int, int], step_px: int = 32
+                           ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """(left camera pixels (m, 2), right camera pixels (m, 2), projector pixels (m, 2)) of a grid of projector
+    pixels found in both cameras' decoded Gray code; all empty when fewer than 12."""
     grid = projector_grid(projector_size, step_px)
     cl, okl = projector_to_camera(decoded_left, grid)
     cr, okr = projector_to_camera(decoded_right, grid)
     ok = okl & okr
     if ok.sum() < 12:
-        return np.zeros((0, 3)), np.zeros((0, 2))
-    X = triangulate(left, right, T_right_from_left, cl[ok], cr[ok])
-    return X, grid[ok]
+        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2))
+    return cl[ok], cr[ok], grid[ok]
+
+
+def wall_points_from_stereo(decoded_left: NDArray[np.float64], decoded_right: NDArray[np.float64],
+                            left: Intrinsics, right: Intrinsics, T_right_from_left: NDArray[np.float64],
+                            projector_size: tuple[int, int], step_px: int = 32
+                            ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(3-D points (m, 3) in the left camera frame, projector pixels (m, 2)) for one projected Gray code."""
+    cl, cr, grid = stereo_correspondences(decoded_left, decoded_right, projector_size, step_px)
+    return triangulate(left, right, T_right_from_left, cl, cr), grid
+
+
+@dataclass
+class ProjectorSamples:
+    """Other outcomes the projector fit could have had, each (intrinsics, T_projector_from_view per pose):
+    `jackknife`, one per pose left out (the poses' own errors, whatever their correlation within a pose), and
+    `stereo`, one per draw of the stereo pair from its covariance (the triangulated points move with it)."""
+
+    jackknife: list[tuple[Intrinsics, list[NDArray[np.float64]]]]
+    stereo: list[tuple[Intrinsics, list[NDArray[np.float64]]]]
+
+    def covariance(self, f: Callable[[Intrinsics, list[NDArray[np.float64]]], NDArray[np.float64]]
+                   ) -> NDArray[np.float64]:
+        """Covariance of f(intrinsics, poses): the jackknife's ((n-1)/n Σ), scaled by (t₀.₉₇₅,ₙ₋₁ / 1.96)² so
+        that its 1.96 σ is a 95 % bound despite its few degrees of freedom, plus the stereo draws' sample
+        covariance."""
+        out: NDArray[np.float64] | float = 0.0
+        if len(self.jackknife) >= 2:
+            v = np.array([f(*s) for s in self.jackknife])
+            n = len(v)
+            d = v - v.mean(axis=0)
+            factor = (float(student_t.ppf(0.975, n - 1)) / 1.96) ** 2
+            out = out + factor * (n - 1) / n * d.T @ d
+        if len(self.stereo) >= 2:
+            out = out + np.atleast_2d(np.cov(np.array([f(*s) for s in self.stereo]), rowvar=False))
+        return np.asarray(out, dtype=np.float64)
+
+
+def projector_poses(points_3d: list[NDArray[np.float64]], projector_pixels: list[NDArray[np.float64]],
+                    projector: Intrinsics) -> list[NDArray[np.float64]]:
+    """T_projector_from_reference per pose for given intrinsics (PnP on each pose's points)."""
+    out = []
+    for X, u in zip(points_3d, projector_pixels, strict=True):
+        x = solve_pnp(X, u, projector.K, projector.dist_array)
+        out.append(pose_from_rvec_tvec(x[:3], x[3:]))
+    return out
+
+
+def projector_samples(points_3d: list[NDArray[np.float64]], projector_pixels: list[NDArray[np.float64]],
+                      projector_size: tuple[int, int], camera_pixels: list[tuple[NDArray[np.float64],
+                                                                               NDArray[np.float64]]],
+                      stereo_draws: list[tuple[Intrinsics, Intrinsics, NDArray[np.float64]]],
+                      model: str = PROJECTOR_MODEL) -> ProjectorSamples:
+    """The projector refitted with each pose left out (then every pose solved with those intrinsics) and with
+    the points triangulated by each stereo draw (camera_pixels: per pose, its left and right pixels)."""
+    jackknife = []
+    for i in range(len(points_3d)):
+        keep = [j for j in range(len(points_3d)) if j != i]
+        try:
+            fit = calibrate_inverse_camera([points_3d[j] for j in keep], [projector_pixels[j] for j in keep],
+                                           projector_size, model)
+        except InputError:
+            continue  # this pose was needed to fix the intrinsics: the jackknife goes without it
+        jackknife.append((fit.projector, projector_poses(points_3d, projector_pixels, fit.projector)))
+    stereo = []
+    for left, right, T_rl in stereo_draws:
+        X = [triangulate(left, right, T_rl, cl, cr) for cl, cr in camera_pixels]
+        fit = calibrate_inverse_camera(X, projector_pixels, projector_size, model)
+        stereo.append((fit.projector, fit.T_projector_from_view))
+    return ProjectorSamples(jackknife, stereo)
 
 
 # --- one camera + printed board (Moreno & Taubin) ------------------------------------------------------------

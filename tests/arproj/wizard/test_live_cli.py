@@ -15,9 +15,6 @@ from geometry.rig import Rig
 
 
 @pytest.mark.gl
-@pytest.mark.skip(reason="known defect, issue 18 left open: in the whole suite on a loaded 2-core machine the live "
-                  "projector fit collapsed (fx -> 0) in 2 of 2 runs while it passes alone (3 of 3); the Gray-code "
-                  "capture or the fit's start needs a guard before this runs in CI")
 def test_live_calibration_through_the_cli(tmp_path: Path) -> None:
     rig_dir = tmp_path / "rig"
     # A process of its own, as a user runs it: nothing left behind by earlier tests in this process (signal
