@@ -36,7 +36,7 @@ from calibration.stereo import calibrate_camera, view_tilt_deg
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, make_pose, pose_from_rvec_tvec
-from geometry.robust import fit_plane
+from geometry.robust import best_hypothesis, draw_samples, fit_plane, refine
 from geometry.triangulation import triangulate
 
 # --- tolerances, in one place ------------------------------------------------------------------------------
@@ -59,6 +59,8 @@ MIN_VIEWS_FOR_K3 = 10
 PROJECTOR_FOCAL_RANGE_WIDTHS = (0.25, 10.0)
 PROJECTOR_MAX_ASPECT = 1.2  # fx/fy (square projector pixels: about 1)
 PROJECTOR_MAX_RMS_PX = 2.0  # decoded Gray code reprojects to about a tenth of this
+WALL_PLANE_TOLERANCE_M = 0.03  # triangulated wall points scatter by ~1 cm in depth at 2 m
+WALL_PLANE_ITERATIONS = 200
 PROJECTOR_MODEL = "k1k2"  # lens shift puts image corners far off-axis (r ≈ 0.5): k2 matters; p, k3 overfit
 
 Tracker = Callable[[Iterable, str, int], Iterator]
@@ -362,20 +364,29 @@ def calibrate_inverse_camera(points_3d: list[NDArray[np.float64]], projector_pix
     flags = cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3
     if model in ("none", "k1"):
         flags |= cv2.CALIB_FIX_K2 | (cv2.CALIB_FIX_K1 if model == "none" else 0)
-    _, K, dist, _, _ = cv2.calibrateCamera(flat_obj, img, (w, h), K0, np.zeros(5), flags=flags)
-    intr0 = Intrinsics.from_K(K, w, h, dist.ravel()[:5])
-    poses0 = []
-    for q, u in zip(local, projector_pixels, strict=True):
-        x = solve_pnp(q, u, intr0.K, intr0.dist_array)
-        poses0.append(pose_from_rvec_tvec(x[:3], x[3:]))
-    observations = [Observation(0, i, np.asarray(u, np.float64), q)
-                    for i, (q, u) in enumerate(zip(local, projector_pixels, strict=True))]
-    fit = bundle_adjust([intr0], [model], observations, poses0)
+    try:  # a focal length that goes through 0 on the way (garbage in) is refused like a degenerate result
+        _, K, dist, _, _ = cv2.calibrateCamera(flat_obj, img, (w, h), K0, np.zeros(5), flags=flags)
+        intr0 = Intrinsics.from_K(K, w, h, dist.ravel()[:5])
+        poses0 = []
+        for q, u in zip(local, projector_pixels, strict=True):
+            x = solve_pnp(q, u, intr0.K, intr0.dist_array)
+            poses0.append(pose_from_rvec_tvec(x[:3], x[3:]))
+        observations = [Observation(0, i, np.asarray(u, np.float64), q)
+                        for i, (q, u) in enumerate(zip(local, projector_pixels, strict=True))]
+        fit = bundle_adjust([intr0], [model], observations, poses0)
+    except InputError as err:
+        raise InputError(f"the projector fit is degenerate ({err.message}), nothing written", DEGENERATE_HINT
+                         ) from None
     check_projector_fit(fit.cameras[0], fit.rms_px)
     T_proj_from_ref = [T @ invert(F) for T, F in zip(fit.T_0_from_view, frames, strict=True)]
     per_pose = [float(np.sqrt(np.mean(np.sum(r ** 2, axis=1)))) for r in fit.residuals]
     return ProjectorCalibration(fit.cameras[0], fit.rms_px, T_proj_from_ref, per_pose_rms_px=per_pose,
                                 sources=list(sources or []), projector_sigma=fit.intrinsics_sigma[0])
+
+
+DEGENERATE_HINT = ("the captured pictures do not match the patterns shown: check that the cameras see the projected "
+                   "image on the wall with nothing in the beam, and that each capture shows its pattern (raise "
+                   "--settle), then calibrate again")
 
 
 def check_projector_fit(projector: Intrinsics, rms_px: float) -> None:
@@ -390,8 +401,7 @@ def check_projector_fit(projector: Intrinsics, rms_px: float) -> None:
         problems.append(f"the points reproject to {rms_px:.2f} px RMS (limit {PROJECTOR_MAX_RMS_PX:g})")
     if problems:
         raise InputError("the projector fit is degenerate (" + "; ".join(problems) + "), nothing written",
-                         "the captured pictures do not match the patterns shown: check that the cameras see the "
-                         "projected image and each capture shows its pattern (raise --settle), then calibrate again")
+                         DEGENERATE_HINT)
 
 
 # --- stereo path ---------------------------------------------------------------------------------------------
@@ -426,6 +436,36 @@ def wall_points_from_stereo(decoded_left: NDArray[np.float64], decoded_right: ND
     """(3-D points (m, 3) in the left camera frame, projector pixels (m, 2)) for one projected Gray code."""
     cl, cr, grid = stereo_correspondences(decoded_left, decoded_right, projector_size, step_px)
     return triangulate(left, right, T_right_from_left, cl, cr), grid
+
+
+def wall_inliers(points: NDArray[np.float64], tolerance_m: float = WALL_PLANE_TOLERANCE_M,
+                 seed: int = 0) -> NDArray[np.bool_]:
+    """The points (n, 3) on the dominant plane (RANSAC, then least squares): the wall, without whatever stands
+    in the beam before it (a board still held up, a person); the inverse-camera fit starts from one plane per
+    pose."""
+    n = len(points)
+    if n < 3:
+        return np.ones(n, bool)
+    samples = draw_samples(np.random.default_rng(seed), n, 3, WALL_PLANE_ITERATIONS)
+    a, b, c = points[samples[:, 0]], points[samples[:, 1]], points[samples[:, 2]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    normals = normals / np.where(length > 1e-12, length, np.inf)[:, None]  # degenerate samples score 0 ...
+    offsets = np.einsum("ij,ij->i", normals, a)
+
+    def support(h: slice) -> NDArray[np.int64]:
+        d = np.abs(points @ normals[h].T - offsets[h])
+        return np.asarray(np.sum(d < tolerance_m, axis=0) * (length[h] > 1e-12), np.int64)  # ... here
+
+    best = best_hypothesis(len(samples), support, chunk=256)
+
+    def refit(inliers: NDArray[np.bool_]) -> tuple[None, NDArray[np.bool_]]:
+        centre, normal = fit_plane(points[inliers])
+        return None, np.abs((points - centre) @ normal) < tolerance_m
+
+    first = np.abs(points @ normals[best] - offsets[best]) < tolerance_m
+    _, inliers = refine(first, refit, rounds=3, min_inliers=3)
+    return inliers
 
 
 @dataclass

@@ -77,6 +77,7 @@ def run_live(opts: LiveOptions, track: Track, design_mount: np.ndarray | None = 
             rig.quality["stereo"] = stereo_rig.quality["stereo"]
             rig.save(rig_dir)
             summary["stereo"] = result["quality"]
+            station.clear_board()  # the projector step needs the wall alone in the beam
         if opts.right is None:
             camera = rig.intrinsics.get("camera_left")
             calib = step_projector_board(station, board, opts.poses, camera, track)

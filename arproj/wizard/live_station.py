@@ -38,6 +38,10 @@ class BoardMover(Protocol):
         """Put the board at its next pose for this plan (wall, mount, stereo), as the instruction says."""
         ...
 
+    def clear(self, instruction: str) -> None:
+        """Take the board away (out of the cameras' view and the projector's beam)."""
+        ...
+
 
 class PersonMover:
     """A person moves the board: say what to do and wait for Enter."""
@@ -47,6 +51,9 @@ class PersonMover:
 
     def place(self, plan: str, instruction: str) -> None:
         del plan
+        self.ask(f"{instruction}, then press Enter ")
+
+    def clear(self, instruction: str) -> None:
         self.ask(f"{instruction}, then press Enter ")
 
 
@@ -59,6 +66,10 @@ class UrlMover:
     def place(self, plan: str, instruction: str) -> None:
         del instruction
         fetch_json(f"{self.url}/next?plan={plan}", "the board mover")
+
+    def clear(self, instruction: str) -> None:
+        del instruction
+        fetch_json(f"{self.url}/clear", "the board mover")
 
 
 def fetch_json(url: str, what: str) -> dict:
@@ -164,6 +175,11 @@ class LiveStation:
             raise InputError(f"head roll {a[2]:.2f}° asked of a pan/tilt head", "plan with roll 0")
         self.head.move_to(a[0] - HEAD_APPROACH_DEG, a[1] - HEAD_APPROACH_DEG)
         self.head.move_to(a[0], a[1])
+
+    def clear_board(self) -> None:
+        """The board away: nothing stands in the beam before the wall (the next capture waits for the change)."""
+        self.before_change()
+        self.mover.clear("take the board away: nothing may stand in the projector's beam or the cameras' view")
 
     def board_views(self, board: Board, n: int, plan: str = "stereo",
                     instruction: str = "hold the board somewhere new in front of both cameras, tilted"

@@ -2,9 +2,12 @@
 calibrated from it (one camera and a printed board, or the stereo pair and triangulated wall points), the head
 fitted from the projector's pose at the head plan's angles, the cameras' mount from the laser and a board.
 
-Every recovered quantity carries a 95 % bound from its fit's covariance: the projector's fx, fy, cx, cy
-(1.96 σ), the projector's predicted pose at head angles not used for fitting (the head model's covariance
-carried to it; ellipsoid bounds) and the mount (calibration/laser_mount.py). `truth_check` compares them with
+Every recovered quantity carries a 95 % bound. The projector's fx, fy, cx, cy (1.96 σ): σ from a jackknife over
+the head poses (allowing for its few degrees of freedom) plus the stereo pair's covariance carried through
+triangulation by refitting to points triangulated by draws of the pair; the fit's own covariance takes the
+triangulated points as exact and independent and is several times too small. The projector's predicted pose at
+head angles not used for fitting (ellipsoid bounds): the head fit's covariance plus the same samples, each
+refitted. The mount: calibration/laser_mount.py. `truth_check` compares them with
 the simulated site's truth (arproj.sim.live's truth.json).
 """
 
@@ -39,6 +42,7 @@ from calibration.projector import (
     projector_samples,
     projector_size_warning,
     stereo_correspondences,
+    wall_inliers,
 )
 from calibration.stereo import sample_stereo
 from geometry.errors import InputError
@@ -51,6 +55,7 @@ from geometry.triangulation import triangulate
 PAN_TILT_PLAN_DEG = (15.0, 10.0)  # pan and tilt excursions about the aim: the projected image stays in view
 WALL_POINT_STEP_PX = 16  # projector-pixel grid of triangulated wall points per head pose
 ROLL = 2  # the joint a Pelco-D pan/tilt head does not have
+OFF_WALL_WARN_SHARE = 0.05
 STEREO_DRAWS = 24  # draws of the stereo pair from its covariance, each re-triangulated and the projector refitted
 STEREO_DRAW_SEED = 18
 # A mount is drawn and built to about this (95 %): a calibrated mount less certain than that is not adopted.
@@ -87,6 +92,7 @@ def step_projector_stereo(station: LiveStation, rig: Rig, out: Path, angles: lis
     T_rl = rig.pose("T_camera_right_from_camera_left")
     size = station.projector_size
     points, pixels, camera_pixels, used, skipped, warnings = [], [], [], [], [], []
+    off_wall: list[int] = []
     for k, a in enumerate(angles):
         station.command_head(a)
         caps_l, caps_r = gray_code_captures(station, track, f"head pose {k + 1}/{len(angles)}: Gray code")
@@ -97,15 +103,21 @@ def step_projector_stereo(station: LiveStation, rig: Rig, out: Path, angles: lis
         if len(px) == 0:
             skipped.append([float(v) for v in a])
             continue
-        points.append(triangulate(left, right, T_rl, cl, cr))
-        pixels.append(px)
-        camera_pixels.append((cl, cr))
+        X = triangulate(left, right, T_rl, cl, cr)
+        wall = wall_inliers(X)  # what stands in the beam before the wall is no wall point
+        off_wall.append(int(np.count_nonzero(~wall)))
+        points.append(X[wall])
+        pixels.append(px[wall])
+        camera_pixels.append((cl[wall], cr[wall]))
         used.append(a)
     try:
         calib = calibrate_inverse_camera(points, pixels, size, sources=[f"head {a.tolist()}" for a in used])
     except InputError as err:
         where = f" (too few wall points at head angles {skipped})" if skipped else ""
         raise InputError(f"projector: {err.message}{where}", err.hint) from None
+    if sum(off_wall) > OFF_WALL_WARN_SHARE * sum(len(px) for px in pixels):
+        warnings.append(f"{sum(off_wall)} of {sum(off_wall) + sum(len(px) for px in pixels)} projected points "
+                        "were not on the wall (something stood in the beam) and were left out")
     calib.warnings.extend(warnings)
     samples = _projector_uncertainty(calib, rig, points, pixels, camera_pixels, size, track)
     rig.intrinsics["projector"] = calib.projector
