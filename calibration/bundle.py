@@ -44,6 +44,22 @@ class BundleResult:
     T_0_from_view: list[NDArray[np.float64]]
     residuals: list[NDArray[np.float64]]  # per observation, (n, 2) px, in the order given
     intrinsics_sigma: list[dict[str, float] | None] = field(default_factory=list)  # per camera (None: fixed)
+    # Covariance of the unknowns other than the view poses, in the order of `parameters` (see sample_cameras).
+    covariance: NDArray[np.float64] | None = None
+    parameters: list[str] = field(default_factory=list)
+    models: list[str] = field(default_factory=list)
+    fixed: list[bool] = field(default_factory=list)
+
+    def sample_cameras(self, rng: np.random.Generator, n: int
+                       ) -> list[tuple[list[Intrinsics], NDArray[np.float64] | None]]:
+        """n draws of (cameras, T_1_from_0) from the fit's covariance (Gaussian, first order): what the
+        cameras might be, for carrying their uncertainty into what is computed from them."""
+        if self.covariance is None:
+            raise ValueError("this bundle result has no covariance")
+        x0 = _camera_vector(self.cameras, self.models, self.fixed, self.T_1_from_0)
+        draws = rng.multivariate_normal(x0, self.covariance, size=n, method="eigh")
+        return [_cameras_from_vector(x, self.cameras, self.models, self.fixed, self.T_1_from_0 is not None)
+                for x in draws]
 
     @property
     def rms_px(self) -> float:
@@ -126,15 +142,9 @@ def bundle_adjust(cameras: list[Intrinsics], models: list[str], observations: li
     """Refine cameras (unless fixed), T_1_from_0 (two cameras) and view poses from initial values."""
     fixed = list(fixed) if fixed is not None else [False] * len(cameras)
     problem = _Problem(cameras, models, fixed, observations, len(T_0_from_view))
-    x0 = []
-    for cam, intr in enumerate(cameras):
-        if not fixed[cam]:
-            d = dist5_from(intr.dist)
-            x0.append(np.concatenate([[intr.fx, intr.fy, intr.cx, intr.cy], d[list(problem.free[cam])]]))
-    if len(cameras) == 2:
-        if T_1_from_0 is None:
-            raise ValueError("two cameras need an initial T_1_from_0")
-        x0.append(np.concatenate(rvec_tvec_from_pose(T_1_from_0)))
+    if len(cameras) == 2 and T_1_from_0 is None:
+        raise ValueError("two cameras need an initial T_1_from_0")
+    x0 = [_camera_vector(cameras, models, fixed, T_1_from_0 if len(cameras) == 2 else None)]
     x0.extend(np.concatenate(rvec_tvec_from_pose(T)) for T in T_0_from_view)
     x_start = np.concatenate(x0)
     sparsity = problem.sparsity()
@@ -161,15 +171,20 @@ def bundle_adjust(cameras: list[Intrinsics], models: list[str], observations: li
         bounds = np.cumsum([0, *[len(observations[k].object_points) for k in idx]])
         for k, a, b in zip(idx, bounds[:-1], bounds[1:], strict=True):
             residuals[k] = r[a:b]
+    cov = _covariance(fit.fun, jacobian(x))
     return BundleResult(out_cams, T10, poses, [residuals[k] for k in range(len(observations))],
-                        _intrinsics_sigma(problem, fit.fun, jacobian(x)))
+                        _intrinsics_sigma(problem, cov), cov[:problem.pose_offset, :problem.pose_offset],
+                        _parameter_names(problem, models), list(models), fixed)
 
 
-def _intrinsics_sigma(problem: _Problem, r: NDArray[np.float64], J: NDArray[np.float64]
-                      ) -> list[dict[str, float] | None]:
-    """σ of each free camera's fx, fy, cx, cy from s²·(JᵀJ)⁻¹ at the solution."""
+def _covariance(r: NDArray[np.float64], J: NDArray[np.float64]) -> NDArray[np.float64]:
+    """s²·(JᵀJ)⁻¹ at the solution."""
     dof = max(len(r) - J.shape[1], 1)
-    cov = float(r @ r) / dof * np.linalg.pinv(J.T @ J)
+    return float(r @ r) / dof * np.linalg.pinv(J.T @ J)
+
+
+def _intrinsics_sigma(problem: _Problem, cov: NDArray[np.float64]) -> list[dict[str, float] | None]:
+    """σ of each free camera's fx, fy, cx, cy."""
     out: list[dict[str, float] | None] = []
     for cam in range(len(problem.cameras)):
         if problem.fixed[cam]:
@@ -179,3 +194,45 @@ def _intrinsics_sigma(problem: _Problem, r: NDArray[np.float64], J: NDArray[np.f
         sd = np.sqrt(np.diag(cov)[o:o + 4])
         out.append({k: float(v) for k, v in zip(("fx", "fy", "cx", "cy"), sd, strict=True)})
     return out
+
+
+def _parameter_names(problem: _Problem, models: list[str]) -> list[str]:
+    names = []
+    for cam in range(len(problem.cameras)):
+        if not problem.fixed[cam]:
+            dist = ("k1", "k2", "p1", "p2", "k3")
+            free = [dist[i] for i in DISTORTION_MODELS[models[cam]]]
+            names += [f"{cam}:{k}" for k in ("fx", "fy", "cx", "cy", *free)]
+    if len(problem.cameras) == 2:
+        names += [f"T_1_from_0:{k}" for k in ("rx", "ry", "rz", "tx", "ty", "tz")]
+    return names
+
+
+def _camera_vector(cameras: list[Intrinsics], models: list[str], fixed: list[bool],
+                   T_1_from_0: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """The unknowns other than the view poses, as bundle_adjust orders them."""
+    x = []
+    for cam, intr in enumerate(cameras):
+        if not fixed[cam]:
+            d = dist5_from(intr.dist)
+            free = list(DISTORTION_MODELS[models[cam]])
+            x.append(np.concatenate([[intr.fx, intr.fy, intr.cx, intr.cy], d[free]]))
+    if T_1_from_0 is not None:
+        x.append(np.concatenate(rvec_tvec_from_pose(T_1_from_0)))
+    return np.concatenate(x) if x else np.zeros(0)
+
+
+def _cameras_from_vector(x: NDArray[np.float64], cameras: list[Intrinsics], models: list[str], fixed: list[bool],
+                         with_pose: bool) -> tuple[list[Intrinsics], NDArray[np.float64] | None]:
+    out, o = [], 0
+    for cam, intr in enumerate(cameras):
+        if fixed[cam]:
+            out.append(intr)
+            continue
+        free = DISTORTION_MODELS[models[cam]]
+        d = np.zeros(5)
+        d[list(free)] = x[o + 4:o + 4 + len(free)]
+        out.append(Intrinsics(float(x[o]), float(x[o + 1]), float(x[o + 2]), float(x[o + 3]), intr.width,
+                              intr.height, tuple(float(v) for v in d)))
+        o += 4 + len(free)
+    return out, (pose_from_rvec_tvec(x[o:o + 3], x[o + 3:o + 6]) if with_pose else None)

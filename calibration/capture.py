@@ -7,9 +7,13 @@ view is new: the board's centre has moved, or its apparent size or shape (tilt) 
 left_NN.png / right_NN.png, ready for `arproj calibrate stereo`.
 
 A pattern shown on a beamer is photographed by `LiveCamera.settled_frame`: a thread reads the camera all the
-time (so no driver or network buffer fills with frames taken before the pattern was shown), and a frame counts
-once it arrived after the pattern was shown plus a settle time and the next frame agrees with it within the
-sensor's noise (the beamer has switched and the exposure holds the new image only), bounded by a timeout.
+time, and a frame counts once it arrived after the pattern was shown plus a settle time and the next frame agrees
+with it within the sensor's noise (the beamer has switched and the exposure holds the new image only), bounded by
+a timeout. Arrival time alone does not prove what a frame shows: a loaded machine reads a stream late, and frames
+exposed before the pattern changed then queue in the network and decoder buffers and arrive after the settle
+time, two alike. So when the scene changed (a new pattern, the board moved), the frame must also differ from the
+frame taken for the previous capture: a stream delivers frames in order, so every frame after the first that
+differs was exposed after the change.
 """
 
 from __future__ import annotations
@@ -133,20 +137,42 @@ class LiveCamera:
                 self._frames = [*self._frames, (time.monotonic(), grey)][-2:]
                 self._cond.notify_all()
 
-    def settled_frame(self, after: float, timeout_s: float = SETTLE_TIMEOUT_S) -> NDArray[np.uint8]:
-        """The first frame that arrived at or after `after` (time.monotonic()) and that the next frame agrees
-        with; InputError when none settles within timeout_s or the camera stops delivering."""
+    def latest(self, timeout_s: float = SETTLE_TIMEOUT_S) -> NDArray[np.uint8]:
+        """The newest frame (waiting for the first one); InputError when none comes."""
         deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while not self._frames:
+                left = deadline - time.monotonic()
+                if self._failed or left <= 0:
+                    raise InputError(f"{self.name}: the camera delivers no pictures", "check its cable or stream URL")
+                self._cond.wait(timeout=left)
+            return self._frames[-1][1]
+
+    def settled_frame(self, after: float, timeout_s: float = SETTLE_TIMEOUT_S,
+                      differs_from: NDArray[np.uint8] | None = None) -> NDArray[np.uint8]:
+        """The first frame that arrived at or after `after` (time.monotonic()), that the next frame agrees with
+        and, if given, that differs from `differs_from` (the frame of the scene before it changed); InputError
+        when none settles within timeout_s or the camera stops delivering."""
+        deadline = time.monotonic() + timeout_s
+        stale = 0
         with self._cond:
             while True:
                 if self._failed:
                     raise InputError(f"{self.name}: the camera stopped delivering pictures",
                                      "check its cable or stream URL")
-                fresh = [f for t, f in self._frames if t >= after]
-                if len(fresh) == 2 and frames_agree(fresh[0], fresh[1]):
-                    return fresh[0]
+                fresh = [(t, f) for t, f in self._frames if t >= after]
+                if len(fresh) == 2 and frames_agree(fresh[0][1], fresh[1][1]):
+                    if differs_from is None or not frames_agree(fresh[0][1], differs_from):
+                        return fresh[0][1]
+                    stale += 1
+                    after = fresh[1][0]  # in order: a changed frame can only come after this one
                 left = deadline - time.monotonic()
                 if left <= 0:
+                    if differs_from is not None and stale:
+                        raise InputError(f"{self.name}: the picture did not change within {timeout_s:.0f} s of "
+                                         "the scene changing (a new pattern, the board moved)",
+                                         "check the projected image and the board are in this camera's view and "
+                                         "the camera is not frozen, or raise --settle-timeout")
                     raise InputError(f"{self.name}: no two frames agreed within {timeout_s:.0f} s of the pattern "
                                      "being shown", "keep the scene still, check the camera's auto exposure is "
                                      "off, or raise --settle-timeout")

@@ -27,6 +27,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import t as student_t
 
 from calibration.boards import Board, BoardView, detect, read_gray
 from calibration.bundle import Observation, bundle_adjust
@@ -35,7 +36,7 @@ from calibration.stereo import calibrate_camera, view_tilt_deg
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, make_pose, pose_from_rvec_tvec
-from geometry.robust import fit_plane
+from geometry.robust import best_hypothesis, draw_samples, fit_plane, refine
 from geometry.triangulation import triangulate
 
 # --- tolerances, in one place ------------------------------------------------------------------------------
@@ -53,6 +54,13 @@ INVERSE_MAP_RADIUS_PX = 6.0  # projector-pixel radius of the patch used to map p
 MIN_PROJECTOR_POSES = 3
 MIN_PLANE_SPREAD_DEG = 10.0  # the wall's normal must differ by this much between some poses
 MIN_VIEWS_FOR_K3 = 10
+# A fit outside these is no projector (a focal length collapsed to 0, say): refused, not written. Throw ratios of
+# real projectors give focal lengths of about 0.5-5 image widths.
+PROJECTOR_FOCAL_RANGE_WIDTHS = (0.25, 10.0)
+PROJECTOR_MAX_ASPECT = 1.2  # fx/fy (square projector pixels: about 1)
+PROJECTOR_MAX_RMS_PX = 2.0  # decoded Gray code reprojects to about a tenth of this
+WALL_PLANE_TOLERANCE_M = 0.03  # triangulated wall points scatter by ~1 cm in depth at 2 m
+WALL_PLANE_ITERATIONS = 200
 PROJECTOR_MODEL = "k1k2"  # lens shift puts image corners far off-axis (r ≈ 0.5): k2 matters; p, k3 overfit
 
 Tracker = Callable[[Iterable, str, int], Iterator]
@@ -356,19 +364,44 @@ def calibrate_inverse_camera(points_3d: list[NDArray[np.float64]], projector_pix
     flags = cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3
     if model in ("none", "k1"):
         flags |= cv2.CALIB_FIX_K2 | (cv2.CALIB_FIX_K1 if model == "none" else 0)
-    _, K, dist, _, _ = cv2.calibrateCamera(flat_obj, img, (w, h), K0, np.zeros(5), flags=flags)
-    intr0 = Intrinsics.from_K(K, w, h, dist.ravel()[:5])
-    poses0 = []
-    for q, u in zip(local, projector_pixels, strict=True):
-        x = solve_pnp(q, u, intr0.K, intr0.dist_array)
-        poses0.append(pose_from_rvec_tvec(x[:3], x[3:]))
-    observations = [Observation(0, i, np.asarray(u, np.float64), q)
-                    for i, (q, u) in enumerate(zip(local, projector_pixels, strict=True))]
-    fit = bundle_adjust([intr0], [model], observations, poses0)
+    try:  # a focal length that goes through 0 on the way (garbage in) is refused like a degenerate result
+        _, K, dist, _, _ = cv2.calibrateCamera(flat_obj, img, (w, h), K0, np.zeros(5), flags=flags)
+        intr0 = Intrinsics.from_K(K, w, h, dist.ravel()[:5])
+        poses0 = []
+        for q, u in zip(local, projector_pixels, strict=True):
+            x = solve_pnp(q, u, intr0.K, intr0.dist_array)
+            poses0.append(pose_from_rvec_tvec(x[:3], x[3:]))
+        observations = [Observation(0, i, np.asarray(u, np.float64), q)
+                        for i, (q, u) in enumerate(zip(local, projector_pixels, strict=True))]
+        fit = bundle_adjust([intr0], [model], observations, poses0)
+    except InputError as err:
+        raise InputError(f"the projector fit is degenerate ({err.message}), nothing written", DEGENERATE_HINT
+                         ) from None
+    check_projector_fit(fit.cameras[0], fit.rms_px)
     T_proj_from_ref = [T @ invert(F) for T, F in zip(fit.T_0_from_view, frames, strict=True)]
     per_pose = [float(np.sqrt(np.mean(np.sum(r ** 2, axis=1)))) for r in fit.residuals]
     return ProjectorCalibration(fit.cameras[0], fit.rms_px, T_proj_from_ref, per_pose_rms_px=per_pose,
                                 sources=list(sources or []), projector_sigma=fit.intrinsics_sigma[0])
+
+
+DEGENERATE_HINT = ("the captured pictures do not match the patterns shown: check that the cameras see the projected "
+                   "image on the wall with nothing in the beam, and that each capture shows its pattern (raise "
+                   "--settle), then calibrate again")
+
+
+def check_projector_fit(projector: Intrinsics, rms_px: float) -> None:
+    """InputError when a fitted projector is degenerate: the captures cannot have shown the patterns in order."""
+    lo, hi = PROJECTOR_FOCAL_RANGE_WIDTHS
+    w = projector.width
+    problems = [f"{k} = {v:.1f} px is not {lo:g}-{hi:g} image widths" for k, v in
+                (("fx", projector.fx), ("fy", projector.fy)) if not lo * w <= v <= hi * w]
+    if not problems and max(projector.fx / projector.fy, projector.fy / projector.fx) > PROJECTOR_MAX_ASPECT:
+        problems.append(f"fx/fy = {projector.fx / projector.fy:.2f} (square pixels: about 1)")
+    if not rms_px <= PROJECTOR_MAX_RMS_PX:
+        problems.append(f"the points reproject to {rms_px:.2f} px RMS (limit {PROJECTOR_MAX_RMS_PX:g})")
+    if problems:
+        raise InputError("the projector fit is degenerate (" + "; ".join(problems) + "), nothing written",
+                         DEGENERATE_HINT)
 
 
 # --- stereo path ---------------------------------------------------------------------------------------------
@@ -382,19 +415,117 @@ def projector_grid(projector_size: tuple[int, int], step_px: int) -> NDArray[np.
     return np.column_stack([gx.ravel(), gy.ravel()])
 
 
-def wall_points_from_stereo(decoded_left: NDArray[np.float64], decoded_right: NDArray[np.float64],
-                            left: Intrinsics, right: Intrinsics, T_right_from_left: NDArray[np.float64],
-                            projector_size: tuple[int, int], step_px: int = 32
-                            ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(3-D points (m, 3) in the left camera frame, projector pixels (m, 2)) for one projected Gray code."""
+def stereo_correspondences(decoded_left: NDArray[np.float64], decoded_right: NDArray[np.float64],
+                           projector_size: tuple[int, int], step_px: int = 32
+                           ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """(left camera pixels (m, 2), right camera pixels (m, 2), projector pixels (m, 2)) of a grid of projector
+    pixels found in both cameras' decoded Gray code; all empty when fewer than 12."""
     grid = projector_grid(projector_size, step_px)
     cl, okl = projector_to_camera(decoded_left, grid)
     cr, okr = projector_to_camera(decoded_right, grid)
     ok = okl & okr
     if ok.sum() < 12:
-        return np.zeros((0, 3)), np.zeros((0, 2))
-    X = triangulate(left, right, T_right_from_left, cl[ok], cr[ok])
-    return X, grid[ok]
+        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2))
+    return cl[ok], cr[ok], grid[ok]
+
+
+def wall_points_from_stereo(decoded_left: NDArray[np.float64], decoded_right: NDArray[np.float64],
+                            left: Intrinsics, right: Intrinsics, T_right_from_left: NDArray[np.float64],
+                            projector_size: tuple[int, int], step_px: int = 32
+                            ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(3-D points (m, 3) in the left camera frame, projector pixels (m, 2)) for one projected Gray code."""
+    cl, cr, grid = stereo_correspondences(decoded_left, decoded_right, projector_size, step_px)
+    return triangulate(left, right, T_right_from_left, cl, cr), grid
+
+
+def wall_inliers(points: NDArray[np.float64], tolerance_m: float = WALL_PLANE_TOLERANCE_M,
+                 seed: int = 0) -> NDArray[np.bool_]:
+    """The points (n, 3) on the dominant plane (RANSAC, then least squares): the wall, without whatever stands
+    in the beam before it (a board still held up, a person); the inverse-camera fit starts from one plane per
+    pose."""
+    n = len(points)
+    if n < 3:
+        return np.ones(n, bool)
+    samples = draw_samples(np.random.default_rng(seed), n, 3, WALL_PLANE_ITERATIONS)
+    a, b, c = points[samples[:, 0]], points[samples[:, 1]], points[samples[:, 2]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    normals = normals / np.where(length > 1e-12, length, np.inf)[:, None]  # degenerate samples score 0 ...
+    offsets = np.einsum("ij,ij->i", normals, a)
+
+    def support(h: slice) -> NDArray[np.int64]:
+        d = np.abs(points @ normals[h].T - offsets[h])
+        return np.asarray(np.sum(d < tolerance_m, axis=0) * (length[h] > 1e-12), np.int64)  # ... here
+
+    best = best_hypothesis(len(samples), support, chunk=256)
+
+    def refit(inliers: NDArray[np.bool_]) -> tuple[None, NDArray[np.bool_]]:
+        centre, normal = fit_plane(points[inliers])
+        return None, np.abs((points - centre) @ normal) < tolerance_m
+
+    first = np.abs(points @ normals[best] - offsets[best]) < tolerance_m
+    _, inliers = refine(first, refit, rounds=3, min_inliers=3)
+    return inliers
+
+
+@dataclass
+class ProjectorSamples:
+    """Other outcomes the projector fit could have had, each (intrinsics, T_projector_from_view per pose):
+    `jackknife`, one per pose left out (the poses' own errors, whatever their correlation within a pose), and
+    `stereo`, one per draw of the stereo pair from its covariance (the triangulated points move with it)."""
+
+    jackknife: list[tuple[Intrinsics, list[NDArray[np.float64]]]]
+    stereo: list[tuple[Intrinsics, list[NDArray[np.float64]]]]
+
+    def covariance(self, f: Callable[[Intrinsics, list[NDArray[np.float64]]], NDArray[np.float64]]
+                   ) -> NDArray[np.float64]:
+        """Covariance of f(intrinsics, poses): the jackknife's ((n-1)/n Σ), scaled by (t₀.₉₇₅,ₙ₋₁ / 1.96)² so
+        that its 1.96 σ is a 95 % bound despite its few degrees of freedom, plus the stereo draws' sample
+        covariance."""
+        out: NDArray[np.float64] | float = 0.0
+        if len(self.jackknife) >= 2:
+            v = np.array([f(*s) for s in self.jackknife])
+            n = len(v)
+            d = v - v.mean(axis=0)
+            factor = (float(student_t.ppf(0.975, n - 1)) / 1.96) ** 2
+            out = out + factor * (n - 1) / n * d.T @ d
+        if len(self.stereo) >= 2:
+            out = out + np.atleast_2d(np.cov(np.array([f(*s) for s in self.stereo]), rowvar=False))
+        return np.asarray(out, dtype=np.float64)
+
+
+def projector_poses(points_3d: list[NDArray[np.float64]], projector_pixels: list[NDArray[np.float64]],
+                    projector: Intrinsics) -> list[NDArray[np.float64]]:
+    """T_projector_from_reference per pose for given intrinsics (PnP on each pose's points)."""
+    out = []
+    for X, u in zip(points_3d, projector_pixels, strict=True):
+        x = solve_pnp(X, u, projector.K, projector.dist_array)
+        out.append(pose_from_rvec_tvec(x[:3], x[3:]))
+    return out
+
+
+def projector_samples(points_3d: list[NDArray[np.float64]], projector_pixels: list[NDArray[np.float64]],
+                      projector_size: tuple[int, int], camera_pixels: list[tuple[NDArray[np.float64],
+                                                                               NDArray[np.float64]]],
+                      stereo_draws: list[tuple[Intrinsics, Intrinsics, NDArray[np.float64]]],
+                      model: str = PROJECTOR_MODEL) -> ProjectorSamples:
+    """The projector refitted with each pose left out (then every pose solved with those intrinsics) and with
+    the points triangulated by each stereo draw (camera_pixels: per pose, its left and right pixels)."""
+    jackknife = []
+    for i in range(len(points_3d)):
+        keep = [j for j in range(len(points_3d)) if j != i]
+        try:
+            fit = calibrate_inverse_camera([points_3d[j] for j in keep], [projector_pixels[j] for j in keep],
+                                           projector_size, model)
+        except InputError:
+            continue  # this pose was needed to fix the intrinsics: the jackknife goes without it
+        jackknife.append((fit.projector, projector_poses(points_3d, projector_pixels, fit.projector)))
+    stereo = []
+    for left, right, T_rl in stereo_draws:
+        X = [triangulate(left, right, T_rl, cl, cr) for cl, cr in camera_pixels]
+        fit = calibrate_inverse_camera(X, projector_pixels, projector_size, model)
+        stereo.append((fit.projector, fit.T_projector_from_view))
+    return ProjectorSamples(jackknife, stereo)
 
 
 # --- one camera + printed board (Moreno & Taubin) ------------------------------------------------------------

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from calibration.boards import Board, BoardView, reverse_view
-from calibration.bundle import Observation, bundle_adjust
+from calibration.bundle import BundleResult, Observation, bundle_adjust
 from calibration.camera_model import DISTORTION_MODELS, dist5_from, solve_pnp
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
@@ -100,6 +100,7 @@ class StereoCalibration:
     coverage: dict = field(default_factory=dict)
     mono_rms_px: tuple[float, float] = (float("nan"), float("nan"))
     distortion_model: str = DEFAULT_MODEL
+    bundle: BundleResult | None = None  # the joint refinement (its covariance: stereo_covariance_doc)
 
     @property
     def baseline_m(self) -> float:
@@ -371,7 +372,29 @@ def _joint(pairs: list[tuple[BoardView, BoardView]], mono_left: CameraCalibratio
            for lv, rv in pairs]
     return StereoCalibration(left, right, fit.T_1_from_0, fit.rms_px, float(np.mean(epi)),
                              [(lv.source, rv.source) for lv, rv in pairs], per_pair, fit.T_0_from_view,
-                             per_pair_epipolar_px=epi, distortion_model=model)
+                             per_pair_epipolar_px=epi, distortion_model=model, bundle=fit)
+
+
+def stereo_covariance_doc(calib: StereoCalibration) -> dict:
+    """The joint refinement's covariance of both cameras' intrinsics and T_right_from_left (rvec, tvec), as
+    written into rig.yaml's stereo quality, so later steps can carry the pair's uncertainty."""
+    assert calib.bundle is not None and calib.bundle.covariance is not None
+    return {"parameters": list(calib.bundle.parameters),
+            "matrix": [[float(f"{v:.6g}") for v in row] for row in calib.bundle.covariance]}
+
+
+def sample_stereo(left: Intrinsics, right: Intrinsics, T_right_from_left: NDArray[np.float64], doc: dict,
+                  distortion_model: str, rng: np.random.Generator, n: int
+                  ) -> list[tuple[Intrinsics, Intrinsics, NDArray[np.float64]]]:
+    """n draws of (left, right, T_right_from_left) from a stereo_covariance_doc."""
+    fit = BundleResult([left, right], np.asarray(T_right_from_left, dtype=np.float64), [], [],
+                       covariance=np.asarray(doc["matrix"], dtype=np.float64), parameters=list(doc["parameters"]),
+                       models=[distortion_model] * 2, fixed=[False, False])
+    out = []
+    for (l_, r_), T in fit.sample_cameras(rng, n):
+        assert T is not None
+        out.append((l_, r_, T))
+    return out
 
 
 def coverage_report(views: list[BoardView], T_camera_from_board: list[NDArray[np.float64]]) -> dict:

@@ -77,6 +77,7 @@ def run_live(opts: LiveOptions, track: Track, design_mount: np.ndarray | None = 
             rig.quality["stereo"] = stereo_rig.quality["stereo"]
             rig.save(rig_dir)
             summary["stereo"] = result["quality"]
+            station.clear_board()  # the projector step needs the wall alone in the beam
         if opts.right is None:
             camera = rig.intrinsics.get("camera_left")
             calib = step_projector_board(station, board, opts.poses, camera, track)
@@ -97,7 +98,7 @@ def run_live(opts: LiveOptions, track: Track, design_mount: np.ndarray | None = 
             raise InputError(f"{rig_dir / RIG_FILE}: no calibrated stereo pair (camera_left, camera_right)",
                              "run `arproj calibrate stereo … --out RIG` first, or add --stereo N")
         fit_angles, check_angles = pan_tilt_plan(station.aim_deg, opts.head_poses)
-        result, rig, calib = step_projector_stereo(station, rig, rig_dir, fit_angles, track)
+        result, rig, calib, samples = step_projector_stereo(station, rig, rig_dir, fit_angles, track)
         summary["projector"] = result["quality"]
         mount = None
         if opts.laser is not None:
@@ -109,7 +110,7 @@ def run_live(opts: LiveOptions, track: Track, design_mount: np.ndarray | None = 
         if MOUNT_POSE not in rig.poses:
             raise InputError(f"{rig_dir / RIG_FILE}: no {MOUNT_POSE} to put the head model in the robot frame",
                              "give --laser URL to calibrate it, or add its design value to rig.yaml's poses")
-        head = step_head_live(rig, rig_dir, result["measurements"], rig.poses[MOUNT_POSE], check_angles)
+        head = step_head_live(rig, rig_dir, result["measurements"], rig.poses[MOUNT_POSE], check_angles, samples)
         summary["head"] = head["quality"]
         summary["captures"] = station.captures
         if truth is not None:

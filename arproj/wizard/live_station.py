@@ -3,10 +3,10 @@ or two cameras (an index, a file or a stream URL), the Pelco-D head at a serial 
 
 It offers what the wizard's steps use (steps.Station): project(image) shows the image, waits `settle_s` for the
 beamer and the exposure, and takes from every camera the first frame that arrived after that and that the next
-frame agrees with (calibration.capture.LiveCamera: cameras are read all the time, so no buffered frame from
-before the pattern is taken); command_head approaches every angle from below, as the head plan assumes;
-board_views asks the person to put the board somewhere new each time (on the simulated site its "person" is a
-URL that moves the board: `BoardMover`).
+frame agrees with, and after a change of the scene (a new image, the board moved) that differs from the previous
+capture's frame (calibration.capture.LiveCamera: a late frame from before the change is never taken);
+command_head approaches every angle from below, as the head plan assumes; board_views asks the person to put the
+board somewhere new each time (on the simulated site its "person" is a URL that moves the board: `BoardMover`).
 """
 
 from __future__ import annotations
@@ -38,6 +38,10 @@ class BoardMover(Protocol):
         """Put the board at its next pose for this plan (wall, mount, stereo), as the instruction says."""
         ...
 
+    def clear(self, instruction: str) -> None:
+        """Take the board away (out of the cameras' view and the projector's beam)."""
+        ...
+
 
 class PersonMover:
     """A person moves the board: say what to do and wait for Enter."""
@@ -47,6 +51,9 @@ class PersonMover:
 
     def place(self, plan: str, instruction: str) -> None:
         del plan
+        self.ask(f"{instruction}, then press Enter ")
+
+    def clear(self, instruction: str) -> None:
         self.ask(f"{instruction}, then press Enter ")
 
 
@@ -59,6 +66,10 @@ class UrlMover:
     def place(self, plan: str, instruction: str) -> None:
         del instruction
         fetch_json(f"{self.url}/next?plan={plan}", "the board mover")
+
+    def clear(self, instruction: str) -> None:
+        del instruction
+        fetch_json(f"{self.url}/clear", "the board mover")
 
 
 def fetch_json(url: str, what: str) -> dict:
@@ -83,6 +94,9 @@ class LiveStation:
         w, h = projector_size
         self.black = np.zeros((h, w), np.uint8)
         self.captures = 0
+        self._shown: NDArray[np.uint8] | None = None  # the image shown for the last capture ...
+        self._previous: list[NDArray[np.uint8]] | None = None  # ... and the frames taken of it
+        self._scene_changed = False
         if head is not None:
             pan, tilt = head.position()
             self.aim_deg = np.array([pan, tilt, 0.0])  # where the person aimed the head (at the wall)
@@ -125,12 +139,25 @@ class LiveStation:
         self.close()
 
     # -- what the steps use ------------------------------------------------------------------------------
+    def before_change(self) -> None:
+        """Remember what the cameras see now, before the scene changes (the board is moved): the next capture
+        takes only frames that differ from it (calibration.capture: frames that arrive late)."""
+        if self._previous is None:
+            self._previous = [cam.latest(self.settle_timeout_s) for cam in self.cameras]
+        self._scene_changed = True
+
     def capture(self, image: NDArray[np.uint8]) -> list[NDArray[np.uint8]]:
-        """Show image, let it settle, and one settled frame from every camera (grey)."""
+        """Show image, let it settle, and one settled frame from every camera (grey). After a change (another
+        image than last time, or before_change), each frame must differ from the previous capture's."""
+        changed = self._scene_changed or self._shown is None or not np.array_equal(image, self._shown)
+        reference = self._previous if changed else None
         self.output.show(image)
         after = time.monotonic() + self.settle_s
         self.captures += 1
-        return [cam.settled_frame(after, self.settle_timeout_s) for cam in self.cameras]
+        frames = [cam.settled_frame(after, self.settle_timeout_s, None if reference is None else reference[i])
+                  for i, cam in enumerate(self.cameras)]
+        self._shown, self._previous, self._scene_changed = image.copy(), frames, False
+        return frames
 
     def project(self, image: NDArray[np.uint8]) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
         frames = self.capture(image)
@@ -149,6 +176,11 @@ class LiveStation:
         self.head.move_to(a[0] - HEAD_APPROACH_DEG, a[1] - HEAD_APPROACH_DEG)
         self.head.move_to(a[0], a[1])
 
+    def clear_board(self) -> None:
+        """The board away: nothing stands in the beam before the wall (the next capture waits for the change)."""
+        self.before_change()
+        self.mover.clear("take the board away: nothing may stand in the projector's beam or the cameras' view")
+
     def board_views(self, board: Board, n: int, plan: str = "stereo",
                     instruction: str = "hold the board somewhere new in front of both cameras, tilted"
                     ) -> tuple[list[BoardView | None], list[BoardView | None]]:
@@ -156,6 +188,7 @@ class LiveStation:
         left: list[BoardView | None] = []
         right: list[BoardView | None] = []
         for k in range(n):
+            self.before_change()
             self.mover.place(plan, f"board pose {k + 1}/{n}: {instruction}")
             frames = self.capture(self.black)
             left.append(detect(board, frames[0], source=f"live board pose {k:02d} camera_left"))

@@ -2,9 +2,12 @@
 calibrated from it (one camera and a printed board, or the stereo pair and triangulated wall points), the head
 fitted from the projector's pose at the head plan's angles, the cameras' mount from the laser and a board.
 
-Every recovered quantity carries a 95 % bound from its fit's covariance: the projector's fx, fy, cx, cy
-(1.96 σ), the projector's predicted pose at head angles not used for fitting (the head model's covariance
-carried to it; ellipsoid bounds) and the mount (calibration/laser_mount.py). `truth_check` compares them with
+Every recovered quantity carries a 95 % bound. The projector's fx, fy, cx, cy (1.96 σ): σ from a jackknife over
+the head poses (allowing for its few degrees of freedom) plus the stereo pair's covariance carried through
+triangulation by refitting to points triangulated by draws of the pair; the fit's own covariance takes the
+triangulated points as exact and independent and is several times too small. The projector's predicted pose at
+head angles not used for fitting (ellipsoid bounds): the head fit's covariance plus the same samples, each
+refitted. The mount: calibration/laser_mount.py. `truth_check` compares them with
 the simulated site's truth (arproj.sim.live's truth.json).
 """
 
@@ -19,7 +22,7 @@ from numpy.typing import NDArray
 from arproj.wizard.live_station import LiveStation
 from arproj.wizard.steps import Track, step_head
 from calibration.boards import Board, detect
-from calibration.head import head_plan
+from calibration.head import fit_head, head_plan
 from calibration.laser_mount import (
     CHI2_3_95,
     MountFit,
@@ -31,22 +34,30 @@ from calibration.laser_mount import (
 from calibration.projector import (
     BoardCaptures,
     ProjectorCalibration,
+    ProjectorSamples,
     calibrate_inverse_camera,
     calibrate_projector_with_board,
     decode_gray_code,
     gray_code_patterns,
+    projector_samples,
     projector_size_warning,
-    wall_points_from_stereo,
+    stereo_correspondences,
+    wall_inliers,
 )
+from calibration.stereo import sample_stereo
 from geometry.errors import InputError
 from geometry.head import HeadModel
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, rotation_vector
 from geometry.rig import Rig
+from geometry.triangulation import triangulate
 
 PAN_TILT_PLAN_DEG = (15.0, 10.0)  # pan and tilt excursions about the aim: the projected image stays in view
 WALL_POINT_STEP_PX = 16  # projector-pixel grid of triangulated wall points per head pose
 ROLL = 2  # the joint a Pelco-D pan/tilt head does not have
+OFF_WALL_WARN_SHARE = 0.05
+STEREO_DRAWS = 24  # draws of the stereo pair from its covariance, each re-triangulated and the projector refitted
+STEREO_DRAW_SEED = 18
 # A mount is drawn and built to about this (95 %): a calibrated mount less certain than that is not adopted.
 MOUNT_DESIGN_TOLERANCE = {"rotation_deg": 1.0, "position_mm": 10.0}
 
@@ -74,32 +85,41 @@ def gray_code_captures(station: LiveStation, track: Track, what: str) -> list[li
 
 
 def step_projector_stereo(station: LiveStation, rig: Rig, out: Path, angles: list[NDArray[np.float64]],
-                          track: Track) -> tuple[dict, Rig, ProjectorCalibration]:
+                          track: Track) -> tuple[dict, Rig, ProjectorCalibration, ProjectorSamples]:
     """The Gray code at each head angle, decoded in both cameras and triangulated → the projector as an inverse
     camera, and its pose at every angle (the head step's measurements)."""
     left, right = rig.intrinsics["camera_left"], rig.intrinsics["camera_right"]
     T_rl = rig.pose("T_camera_right_from_camera_left")
     size = station.projector_size
-    points, pixels, used, skipped, warnings = [], [], [], [], []
+    points, pixels, camera_pixels, used, skipped, warnings = [], [], [], [], [], []
+    off_wall: list[int] = []
     for k, a in enumerate(angles):
         station.command_head(a)
         caps_l, caps_r = gray_code_captures(station, track, f"head pose {k + 1}/{len(angles)}: Gray code")
         if k == 0 and (warning := projector_size_warning(caps_l, size)) is not None:
             warnings.append(warning)
-        X, px = wall_points_from_stereo(decode_gray_code(caps_l, size), decode_gray_code(caps_r, size), left,
-                                        right, T_rl, size, step_px=WALL_POINT_STEP_PX)
-        if len(X) == 0:
+        cl, cr, px = stereo_correspondences(decode_gray_code(caps_l, size), decode_gray_code(caps_r, size), size,
+                                            step_px=WALL_POINT_STEP_PX)
+        if len(px) == 0:
             skipped.append([float(v) for v in a])
             continue
-        points.append(X)
-        pixels.append(px)
+        X = triangulate(left, right, T_rl, cl, cr)
+        wall = wall_inliers(X)  # what stands in the beam before the wall is no wall point
+        off_wall.append(int(np.count_nonzero(~wall)))
+        points.append(X[wall])
+        pixels.append(px[wall])
+        camera_pixels.append((cl[wall], cr[wall]))
         used.append(a)
     try:
         calib = calibrate_inverse_camera(points, pixels, size, sources=[f"head {a.tolist()}" for a in used])
     except InputError as err:
-        raise InputError(f"projector: {err.message} (too few wall points at head angles {skipped})", err.hint
-                         ) from None
+        where = f" (too few wall points at head angles {skipped})" if skipped else ""
+        raise InputError(f"projector: {err.message}{where}", err.hint) from None
+    if sum(off_wall) > OFF_WALL_WARN_SHARE * sum(len(px) for px in pixels):
+        warnings.append(f"{sum(off_wall)} of {sum(off_wall) + sum(len(px) for px in pixels)} projected points "
+                        "were not on the wall (something stood in the beam) and were left out")
     calib.warnings.extend(warnings)
+    samples = _projector_uncertainty(calib, rig, points, pixels, camera_pixels, size, track)
     rig.intrinsics["projector"] = calib.projector
     rig.quality["projector"] = {"rms_px": round(calib.projector_rms_px, 4), "poses": len(used),
                                 "projector_95": calib.quality()["projector_95"], "method": "live Gray code, stereo"}
@@ -107,7 +127,31 @@ def step_projector_stereo(station: LiveStation, rig: Rig, out: Path, angles: lis
     measurements = [{"angles_deg": [float(v) for v in a], "T_camera_left_from_projector": invert(T).tolist()}
                     for a, T in zip(used, calib.T_projector_from_view, strict=True)]
     return ({"quality": calib.quality() | {"head_angles_skipped": skipped}, "measurements": measurements},
-            rig, calib)
+            rig, calib, samples)
+
+
+def _projector_uncertainty(calib: ProjectorCalibration, rig: Rig, points: list[NDArray[np.float64]],
+                           pixels: list[NDArray[np.float64]],
+                           camera_pixels: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
+                           size: tuple[int, int], track: Track) -> ProjectorSamples:
+    """The projector's σ from the jackknife over head poses and from the stereo pair's covariance carried
+    through triangulation (the fit's own covariance takes the triangulated points as exact and their errors
+    as independent: it is far too small); the samples also carry both to the head."""
+    stereo = rig.quality.get("stereo", {})
+    draws = []
+    if "parameter_covariance" in stereo:
+        draws = sample_stereo(rig.intrinsics["camera_left"], rig.intrinsics["camera_right"],
+                              rig.pose("T_camera_right_from_camera_left"), stereo["parameter_covariance"],
+                              stereo.get("distortion_model", "k1k2p1p2k3"), np.random.default_rng(STEREO_DRAW_SEED),
+                              STEREO_DRAWS)
+    else:
+        calib.warnings.append("the rig has no stereo covariance (calibrated before it was kept): the projector's "
+                              "and the head's bounds leave the stereo pair's uncertainty out")
+    samples = projector_samples(points, pixels, size, camera_pixels,
+                                list(track(draws, "projector: carrying the stereo uncertainty", len(draws))))
+    cov = samples.covariance(lambda p, poses: np.array([p.fx, p.fy, p.cx, p.cy]))
+    calib.projector_sigma = {k: float(np.sqrt(cov[i, i])) for i, k in enumerate(("fx", "fy", "cx", "cy"))}
+    return samples
 
 
 def step_projector_board(station: LiveStation, board: Board, n_poses: int, camera: Intrinsics | None,
@@ -115,6 +159,7 @@ def step_projector_board(station: LiveStation, board: Board, n_poses: int, camer
     """One camera: the printed board on the wall in the beam at n poses, the Gray code at each (Moreno-Taubin)."""
     captures = []
     for k in range(n_poses):
+        station.before_change()
         station.mover.place("wall", f"board pose {k + 1}/{n_poses}: put the printed board on the wall in the "
                             "projector's beam, turned or tilted by 15-30° differently from before")
         images = gray_code_captures(station, track, f"board pose {k + 1}/{n_poses}: Gray code")[0]
@@ -123,13 +168,32 @@ def step_projector_board(station: LiveStation, board: Board, n_poses: int, camer
 
 
 def step_head_live(rig: Rig, out: Path, measurements: list[dict], T_robot_from_camera_left: NDArray[np.float64],
-                   check_angles: list[NDArray[np.float64]]) -> dict:
+                   check_angles: list[NDArray[np.float64]], samples: ProjectorSamples | None = None) -> dict:
     """The head model (roll fixed: a pan/tilt head) and the projector's predicted pose at the check angles with
-    its 95 % bounds (largest semi-axes of the rotation's and the position's ellipsoids)."""
+    its 95 % bounds (largest semi-axes of the rotation's and the position's ellipsoids).
+
+    The head fit's covariance sees only how the measured poses scatter about the model; errors all poses share
+    (the projector's intrinsics, the stereo pair) move them together and are carried by refitting the head to
+    the projector fit's samples."""
     result, rig, fit = step_head(rig, out, measurements, T_robot_from_camera_left, fixed_joints=(ROLL,))
+    angles = [m["angles_deg"] for m in measurements]
+    nominal = [fit.model.T_robot_from_projector(a) for a in check_angles]
+
+    def predicted(projector: Intrinsics, poses: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+        del projector
+        model = fit_head(angles, [invert(T) for T in poses], fixed_joints=(ROLL,)).model
+        out = []
+        for a, T0 in zip(check_angles, nominal, strict=True):
+            T = model.T_robot_from_projector(a)
+            out.append(np.concatenate([rotation_vector(T[:3, :3] @ T0[:3, :3].T), T[:3, 3]]))
+        return np.concatenate(out)
+
+    shared = samples.covariance(predicted) if samples is not None else np.zeros((6 * len(check_angles),) * 2)
     per_angle = []
-    for a in check_angles:
+    for k, a in enumerate(check_angles):
         cov_rot, cov_pos = fit.pose_covariance(a)
+        block = shared[6 * k:6 * k + 6, 6 * k:6 * k + 6]
+        cov_rot, cov_pos = cov_rot + block[:3, :3], cov_pos + block[3:, 3:]
         per_angle.append({
             "angles_deg": [float(v) for v in a],
             "rotation_95_deg": float(np.degrees(np.sqrt(CHI2_3_95 * np.linalg.eigvalsh(cov_rot).max()))),
@@ -149,6 +213,7 @@ def step_mount(station: LiveStation, rig: Rig, out: Path, board: Board, n_poses:
     camera = rig.intrinsics["camera_left"]
     views, scans, missed = [], [], []
     for k in range(n_poses):
+        station.before_change()
         station.mover.place("mount", f"mount pose {k + 1}/{n_poses}: stand the panel with the board on the floor "
                             "1.3-1.8 m in front of the robot, across the laser's plane, leaning back 0-25° and "
                             "turned up to ±25°")

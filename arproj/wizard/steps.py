@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from calibration.boards import Board, BoardView, parse_board
 from calibration.head import HeadFit, fit_head, head_plan, rebase_head
 from calibration.projector import calibrate_inverse_camera
-from calibration.stereo import calibrate_stereo, coverage_advice
+from calibration.stereo import calibrate_stereo, coverage_advice, stereo_covariance_doc
 from calibration.validation import (
     GridMeasurement,
     ProjectedGrid,
@@ -59,7 +59,7 @@ def step_stereo(station: Station, out: Path, board_spec: str, n_poses: int = STE
     calib = calibrate_stereo(left, right, board)
     rig = Rig(intrinsics={"camera_left": calib.left, "camera_right": calib.right},
               poses={"T_camera_right_from_camera_left": calib.T_right_from_left},
-              quality={"stereo": calib.quality()})
+              quality={"stereo": calib.quality() | {"parameter_covariance": stereo_covariance_doc(calib)}})
     rig.save(out)
     missing = [v.source if v is not None else f"pose {k:02d}" for k, v in enumerate(left) if v is None]
     result = {"quality": calib.quality(), "advice": coverage_advice(calib.coverage),

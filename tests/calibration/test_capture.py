@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import cv2
+import numpy as np
 import pytest
 
 from calibration.boards import parse_board
-from calibration.capture import capture_pairs, open_source
+from calibration.capture import LiveCamera, capture_pairs, open_source
 from geometry.errors import InputError
 
 FRAMES_PER_PAIR = 3  # each real pair is held still for a few frames, as in front of a real camera
@@ -60,3 +62,39 @@ def test_keeps_each_new_view_once_and_the_files_calibrate(videos: tuple[Path, Pa
 def test_a_camera_that_does_not_open_is_named(tmp_path: Path) -> None:
     with pytest.raises(InputError, match=r"left camera .*nope\.avi.* does not open"):
         open_source(str(tmp_path / "nope.avi"), "left")
+
+
+class _LateStream:
+    """A camera read late: frames taken before the scene changed are still queued after the settle time."""
+
+    def __init__(self, frames: list[np.ndarray], period_s: float = 0.02) -> None:
+        self.frames, self.period_s = list(frames), period_s
+
+    def read(self) -> tuple[bool, np.ndarray | None]:
+        time.sleep(self.period_s)
+        if len(self.frames) > 1:
+            return True, self.frames.pop(0)
+        return True, self.frames[0]  # the new scene, from now on
+
+    def release(self) -> None:
+        return
+
+
+def test_a_late_frame_from_before_the_change_is_not_taken() -> None:
+    old = np.full((40, 60), 30, np.uint8)
+    new = old.copy()
+    new[:, 30:] = 200  # the next Gray-code pattern
+    # Five frames of the old scene arrive after the settle time, alike: arrival time and agreement alone would
+    # take one of them.
+    with LiveCamera(_LateStream([old] * 5 + [new]), "camera_left") as camera:  # type: ignore[arg-type]
+        got = camera.settled_frame(time.monotonic(), timeout_s=5.0, differs_from=old)
+    assert np.array_equal(got, new)
+    with LiveCamera(_LateStream([old] * 5 + [new]), "camera_left") as camera:  # type: ignore[arg-type]
+        assert np.array_equal(camera.settled_frame(time.monotonic(), timeout_s=5.0), old)  # what went wrong
+
+
+def test_a_picture_that_never_changes_is_named() -> None:
+    old = np.full((40, 60), 30, np.uint8)
+    with (LiveCamera(_LateStream([old]), "camera_right") as camera,  # type: ignore[arg-type]
+          pytest.raises(InputError, match="camera_right: the picture did not change")):
+        camera.settled_frame(time.monotonic(), timeout_s=0.5, differs_from=old)

@@ -13,7 +13,9 @@ from calibration.projector import (
     calibrate_projector_with_board,
     decode_gray_code,
     gray_code_patterns,
+    projector_samples,
     projector_size_warning,
+    wall_inliers,
 )
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
@@ -166,3 +168,36 @@ def test_stereo_gray_code_path_recovers_projector_as_inverse_camera() -> None:
         # Pose trades with the intrinsics: 0.5 % focal x 1.5 m = 7.5 mm; 0.3° ≈ 0.8 px of principal point at f = 160
         assert np.linalg.norm(T[:3, 3] - T_projector_from_left[:3, 3]) < 0.01
         assert rotation_angle_deg(T, T_projector_from_left) < 0.3
+
+
+def test_points_off_the_wall_are_found_and_a_collapsed_fit_is_refused() -> None:
+    pts, pix = _wall_views([(0, 0), (20, 0), (-20, 5), (0, 15), (10, -15), (15, 15)], noise_px=0.1)
+    # A board still held up in the beam: a third of the points 30 cm before the wall, on a plane of its own.
+    X = pts[0].copy()
+    front = np.arange(len(X)) % 3 == 0
+    X[front] *= (1.7 / 2.0)
+    inliers = wall_inliers(X)
+    assert np.array_equal(inliers, ~front)
+    # Garbage in (projector pixels that belong to other points): refused with the reason, no intrinsics.
+    rng = np.random.default_rng(3)
+    scrambled = [rng.permutation(u) for u in pix]
+    with pytest.raises(InputError, match="degenerate") as err:
+        calibrate_inverse_camera(pts, scrambled, PROJ_SIZE)
+    assert "nothing written" in err.value.message
+
+
+def test_pose_jackknife_agrees_with_the_fit_covariance_when_errors_are_independent() -> None:
+    # Independent pixel noise, the fit covariance's own assumption: the jackknife over poses (what the live
+    # calibration's bounds use, as it also sees errors shared within a pose) finds about the same σ.
+    angles = [(0, 0), (20, 0), (-20, 5), (0, 15), (10, -15), (15, 15), (-12, -10)]
+    for seed in range(2):
+        pts, pix = _wall_views(angles, noise_px=0.3, seed=seed)
+        fit = calibrate_inverse_camera(pts, pix, PROJ_SIZE)
+        assert fit.projector_sigma is not None
+        cov = projector_samples(pts, pix, PROJ_SIZE, [], []).covariance(
+            lambda p, poses: np.array([p.fx, p.cy]))
+        jackknife = np.sqrt(np.diag(cov)) / (2.447 / 1.96)  # without its allowance for 6 degrees of freedom
+        formal = np.array([fit.projector_sigma["fx"], fit.projector_sigma["cy"]])
+        assert np.all(jackknife > formal / 3) and np.all(jackknife < 3 * formal), (jackknife, formal)
+        err = np.array([fit.projector.fx - PROJECTOR.fx, fit.projector.cy - PROJECTOR.cy])
+        assert np.all(np.abs(err) <= 1.96 * np.sqrt(np.diag(cov)))

@@ -15,9 +15,6 @@ from geometry.rig import Rig
 
 
 @pytest.mark.gl
-@pytest.mark.skip(reason="known defect, issue 18 left open: in the whole suite on a loaded 2-core machine the live "
-                  "projector fit collapsed (fx -> 0) in 2 of 2 runs while it passes alone (3 of 3); the Gray-code "
-                  "capture or the fit's start needs a guard before this runs in CI")
 def test_live_calibration_through_the_cli(tmp_path: Path) -> None:
     rig_dir = tmp_path / "rig"
     # A process of its own, as a user runs it: nothing left behind by earlier tests in this process (signal
@@ -30,14 +27,17 @@ def test_live_calibration_through_the_cli(tmp_path: Path) -> None:
     summary = json.loads(done.stdout[done.stdout.index("{"):])
     truth = summary["truth"]
     p = summary["projector"]
-    # Every figure comes with a bound (that the bound holds in 95 % of seeds is the bench's row, not a test: it
-    # does not yet); the principal point within 2 px (the bench's simulated target), the focal length within 1 %.
+    # Every figure comes with a bound, and the bound is honest: no error beyond twice its 95 % bound (that 95 % of
+    # seeds fall within it is the bench's row, not a test). The principal point within 2 px (the bench's
+    # simulated target); the focal length within 2 % (a flat wall seen over ±15° of pan fixes it to about 1.5 %,
+    # and the bound says so) and the predicted head poses within 40 mm at 2 m (the focal error along the axis).
     assert set(p["projector_95"]) == {"fx", "fy", "cx", "cy"}
-    assert all(truth[f"projector {k}"]["bound"] > 0 for k in ("fx", "fy", "cx", "cy")), truth
+    assert all(check["bound"] > 0 and abs(check["error"]) <= 2 * check["bound"] for name, check in truth.items()
+               if not name.startswith("mount")), truth
     assert abs(truth["projector cx"]["error"]) < 2.0 and abs(truth["projector cy"]["error"]) < 2.0, truth
-    assert abs(truth["projector fx"]["error"]) < 0.01 * p["projector"]["fx"]
+    assert abs(truth["projector fx"]["error"]) < 0.02 * p["projector"]["fx"]
     assert len(summary["head"]["check_angles"]) == 3
-    assert all(truth[f"head check {k} position"]["error"] < 15.0 for k in (1, 2, 3))  # mm, at 2 m
+    assert all(truth[f"head check {k} position"]["error"] < 40.0 for k in (1, 2, 3))  # mm, at 2 m
     m = summary["mount"]
     assert m["adopted"] == (m["mount_95"]["rotation_deg"] <= 1.0 and m["mount_95"]["position_mm"] <= 10.0)
     rig = Rig.load(rig_dir)
