@@ -64,6 +64,8 @@ except KeyboardInterrupt:
 
 def main() -> None:
     """Console-script entry point."""
+    from rich.markup import escape
+
     from arproj.console import err_console
 
     previous = signal.getsignal(signal.SIGINT)
@@ -73,7 +75,8 @@ def main() -> None:
     try:
         app()  # standalone: usage errors print a hint; typer turns KeyboardInterrupt into exit status 130
     except InputError as err:
-        err_console.print(f"[bold red]arproj: error:[/] {err}", highlight=False, soft_wrap=True)
+        # escaped: a value quoted from a file ("[/x]") is text, not markup
+        err_console.print(f"[bold red]arproj: error:[/] {escape(str(err))}", highlight=False, soft_wrap=True)
         sys.exit(2)
     except Interrupted as err:  # a command that says what it kept
         err_console.print(f"\n[bold red]arproj: interrupted:[/] {err}", highlight=False, soft_wrap=True)
