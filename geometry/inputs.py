@@ -128,7 +128,7 @@ def parse_yaml(text: str, source: str, hint: str | None = None) -> Any:
     and the line otherwise."""
     try:
         _check_yaml_bounds(text, source, hint)
-        return yaml.load(text, Loader=_LOADER)  # noqa: S506 - a safe loader (libyaml's CSafeLoader)
+        return yaml.load(text, Loader=_LOADER)
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
@@ -143,10 +143,11 @@ def _no_constant(name: str) -> float:
     raise ValueError(f"{name} is not a number JSON allows")
 
 
-def parse_json(text: str, source: str, hint: str | None = None) -> Any:
-    """A JSON document without NaN/Infinity, nested at most MAX_DEPTH deep; InputError otherwise."""
+def parse_json(text: str, source: str, hint: str | None = None, constants: bool = False) -> Any:
+    """A JSON document nested at most MAX_DEPTH deep, without NaN/Infinity unless constants (Python's json
+    writes them for float NaN); InputError otherwise."""
     try:
-        document = json.loads(text, parse_constant=_no_constant)
+        document = json.loads(text, parse_constant=None if constants else _no_constant)
     except json.JSONDecodeError as err:
         raise InputError(f"{source}: not valid JSON at line {err.lineno}, column {err.colno} ({err.msg})",
                          hint) from None
@@ -221,7 +222,7 @@ def boolean(source: str, where: str, value: Any, hint: str | None = None) -> boo
 
 
 def text(source: str, where: str, value: Any, max_len: int = 1000, hint: str | None = None) -> str:
-    if not isinstance(value, str):
+    if not isinstance(value, str) or "\x00" in value:
         raise fail(source, where, value, "must be text", hint)
     if len(value) > max_len:
         raise fail(source, where, value, f"is {len(value):,} characters; at most {max_len:,}", hint)
@@ -248,7 +249,7 @@ def float_array(source: str, where: str, value: Any, shape: Sequence[int | None]
     integers too large for a float are refused."""
     dims = "x".join("n" if s is None else str(s) for s in shape)
     units = f", {unit}" if unit else ""
-    expected = f"must be a {dims} list of numbers{units}"
+    expected = f"must be a list of {dims} numbers{units}"
     if not isinstance(value, list) and not (isinstance(value, np.ndarray) and value.dtype.kind in "iuf"):
         raise fail(source, where, value, expected, hint)
     if len(value) > max_rows:
@@ -303,9 +304,12 @@ class NpzFile:
     def __iter__(self) -> Iterator[str]:
         return iter(self.names)
 
-    def array(self, name: str, ndim: int | None = None, kinds: str = "iuf") -> np.ndarray:
-        """Array `name`: its dtype kind one of `kinds` (numpy kind letters: i u f b U), ndim as given; the
-        header is checked before the data are read."""
+    def array(self, name: str, ndim: int | None = None, kinds: str = "iuf",
+              shape: Sequence[int | None] | None = None) -> np.ndarray:
+        """Array `name`: its dtype kind one of `kinds` (numpy kind letters: i u f b U), ndim or shape (None: any
+        length) as given; the header is checked before the data are read."""
+        if shape is not None:
+            ndim = len(shape)
         where = f"{self.path}: array {name!r}"
         if name not in self.names:
             raise InputError(f"{where} is missing (it has: {', '.join(self.names[:12]) or 'none'})", self.hint)
@@ -313,18 +317,21 @@ class NpzFile:
             with self._zip.open(f"{name}.npy") as member:
                 version = np.lib.format.read_magic(member)
                 if version == (1, 0):
-                    shape, _, dtype = np.lib.format.read_array_header_1_0(member)
+                    found, _, dtype = np.lib.format.read_array_header_1_0(member)
                 elif version == (2, 0):
-                    shape, _, dtype = np.lib.format.read_array_header_2_0(member)
+                    found, _, dtype = np.lib.format.read_array_header_2_0(member)
                 else:
                     raise ValueError(f"npy format version {version}")
                 if dtype.kind not in kinds or dtype.hasobject:
                     raise InputError(f"{where} holds {dtype} values, expected "
                                      f"{'/'.join(_KIND_NAMES.get(k, k) for k in kinds)}", self.hint)
-                if ndim is not None and len(shape) != ndim:
-                    raise InputError(f"{where} has shape {shape}, expected {ndim} dimension(s)", self.hint)
-                if math.prod(shape) > self.max_elements:
-                    raise InputError(f"{where} has shape {shape}: more than {self.max_elements:,} values",
+                if (ndim is not None and len(found) != ndim) or (shape is not None and any(
+                        s is not None and s != n for s, n in zip(shape, found, strict=True))):
+                    expected = "x".join("n" if s is None else str(s) for s in shape) if shape is not None else \
+                        f"{ndim} dimension(s)"
+                    raise InputError(f"{where} has shape {found}, expected {expected}", self.hint)
+                if math.prod(found) > self.max_elements:
+                    raise InputError(f"{where} has shape {found}: more than {self.max_elements:,} values",
                                      self.hint)
             with self._zip.open(f"{name}.npy") as member:
                 return np.lib.format.read_array(member, allow_pickle=False)
@@ -335,10 +342,7 @@ class NpzFile:
 
     def floats(self, name: str, shape: Sequence[int | None], finite: bool = True) -> NDArray[np.float64]:
         """Array `name` as float64 of `shape` (None: any length), finite unless finite=False (NaN allowed)."""
-        arr = self.array(name, ndim=len(shape), kinds="iuf").astype(np.float64)
-        if any(s is not None and s != n for s, n in zip(shape, arr.shape, strict=True)):
-            dims = "x".join("n" if s is None else str(s) for s in shape)
-            raise InputError(f"{self.path}: array {name!r} has shape {arr.shape}, expected {dims}", self.hint)
+        arr = self.array(name, kinds="iuf", shape=shape).astype(np.float64)
         if finite and not np.all(np.isfinite(arr)):
             raise InputError(f"{self.path}: array {name!r} holds values that are not finite numbers", self.hint)
         return arr
@@ -368,3 +372,32 @@ def _reason(err: BaseException) -> str:
     if "integer string conversion" in text:
         return "a number of more than 4,300 digits"
     return text[:120]
+
+
+# -- images ----------------------------------------------------------------------------------------------------
+MAX_IMAGE_BYTES = 512 * 2**20
+MAX_IMAGE_SIDE = 16384  # pixels per side of a photo (a 100-megapixel camera is 12,000 wide)
+
+
+def read_image(path: str | Path, what: str = "image file", grey: bool = True, hint: str | None = None
+               ) -> NDArray[np.uint8]:
+    """An image file as uint8 (grey, or BGR as OpenCV reads it); InputError naming the file when it is missing,
+    not an image, or larger than MAX_IMAGE_SIDE per side (read from its header before it is decoded)."""
+    import cv2
+    from PIL import Image, UnidentifiedImageError
+
+    path = Path(path)
+    hint = hint or "remove it or replace it with a JPEG/PNG capture"
+    check_file(path, what, MAX_IMAGE_BYTES, hint)
+    try:
+        with Image.open(path) as header:  # reads the header only
+            width, height = header.size
+    except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError):
+        width = height = 0  # not a format Pillow knows (OpenCV may), or damaged: OpenCV decides below
+    if max(width, height) > MAX_IMAGE_SIDE:
+        raise InputError(f"{path}: {width}x{height} pixels is larger than any camera of this system "
+                         f"(at most {MAX_IMAGE_SIDE} per side)", hint)
+    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR)
+    if image is None or image.size == 0:
+        raise InputError(f"{path}: not a readable image", hint)
+    return np.asarray(image, dtype=np.uint8)
