@@ -196,7 +196,8 @@ def check_objects_within(objects: list[MappedObject], bounds: tuple[float, float
             (p[:, 1] > y1 + margin_m)
         if outside.any():
             at = p[np.argmax(outside)].round(3).tolist()
-            raise InputError(f"{path}: objects[{i}] ({obj.cls}) has a point at {at} m, off the mapped wall ({x0:g}..{x1:g} x {y0:g}..{y1:g} m): objects.json from "
+            raise InputError(f"{path}: objects[{i}] ({obj.cls}) has a point at {at} m, off the mapped wall "
+                             f"({x0:g}..{x1:g} x {y0:g}..{y1:g} m): objects.json from "
                              "another map?", "use the objects.json written with this map by `arproj map`")
 
 
