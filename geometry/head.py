@@ -65,7 +65,7 @@ class HeadModel:
         for key in ("axes", "points_m", "T_robot_from_projector_zero"):
             if key not in d:
                 raise InputError(f"{source}: key {key!r} is missing")
-        return cls(axes=float_array(source, "axes", d["axes"], (3, 3)),
+        return cls(axes=float_array(source, "axes", d["axes"], (3, 3), -10.0, 10.0),
                    points=float_array(source, "points_m", d["points_m"], (3, 3), -100.0, 100.0, unit="metres"),
                    T_robot_from_projector_zero=float_array(source, "T_robot_from_projector_zero",
                                                            d["T_robot_from_projector_zero"], (4, 4), -100.0, 100.0),

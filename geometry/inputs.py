@@ -254,6 +254,8 @@ def float_array(source: str, where: str, value: Any, shape: Sequence[int | None]
         raise fail(source, where, value, expected, hint)
     if len(value) > max_rows:
         raise fail(source, where, value, f"has {len(value):,} rows; at most {max_rows:,}", hint)
+    if isinstance(value, list) and not _numbers_only(value, len(shape)):
+        raise fail(source, where, value, expected, hint)  # numpy would take True as 1 and "1.5" as 1.5
     try:
         arr = np.asarray(value)
     except (ValueError, TypeError, OverflowError, RecursionError):
@@ -267,6 +269,21 @@ def float_array(source: str, where: str, value: Any, shape: Sequence[int | None]
     if arr.size and (arr.min() < lo or arr.max() > hi):
         raise fail(source, where, value, f"has a value outside {lo:g}..{hi:g}{units}", hint)
     return arr
+
+
+def _numbers_only(value: list, ndim: int) -> bool:
+    """Whether nested lists `ndim` deep hold numbers only (no bool, text, null or deeper lists), without
+    recursion."""
+    stack: list[tuple[Any, int]] = [(value, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if depth < ndim:
+            if not all(isinstance(v, list) for v in node):
+                return False
+            stack.extend((v, depth + 1) for v in node)
+        elif not all(is_number(v) for v in node):
+            return False
+    return True
 
 
 # -- npz -------------------------------------------------------------------------------------------------------
@@ -389,15 +406,22 @@ def read_image(path: str | Path, what: str = "image file", grey: bool = True, hi
     path = Path(path)
     hint = hint or "remove it or replace it with a JPEG/PNG capture"
     check_file(path, what, MAX_IMAGE_BYTES, hint)
+    too_large = InputError(f"{path}: larger than any camera of this system takes (at most {MAX_IMAGE_SIDE} "
+                           "pixels per side)", hint)
     try:
         with Image.open(path) as header:  # reads the header only
             width, height = header.size
-    except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError):
+    except Image.DecompressionBombError:
+        raise too_large from None
+    except (UnidentifiedImageError, OSError, ValueError):
         width = height = 0  # not a format Pillow knows (OpenCV may), or damaged: OpenCV decides below
     if max(width, height) > MAX_IMAGE_SIDE:
-        raise InputError(f"{path}: {width}x{height} pixels is larger than any camera of this system "
+        raise InputError(f"{path}: {width}x{height} pixels is larger than any camera of this system takes "
                          f"(at most {MAX_IMAGE_SIDE} per side)", hint)
-    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR)
+    try:
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR)
+    except cv2.error:  # OpenCV's own size limit, a decoder's assertion
+        raise too_large from None
     if image is None or image.size == 0:
         raise InputError(f"{path}: not a readable image", hint)
     return np.asarray(image, dtype=np.uint8)

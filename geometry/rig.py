@@ -121,7 +121,7 @@ class Rig:
         if not path.exists():
             raise InputError(f"{path}: no rig file here", hint)
         doc = load_document(path, "rig file", hint)
-        if not isinstance(doc, dict) or doc.get("version") != 1:
+        if not isinstance(doc, dict) or doc.get("version") != 1 or isinstance(doc.get("version"), bool):
             raise InputError(f"{path}: not an arproj rig file (expected 'version: 1')", hint)
         quality = doc.get("quality") or {}
         rig = cls(quality=mapping(source, "quality", quality, "a mapping of figures", hint))
