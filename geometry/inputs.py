@@ -18,10 +18,12 @@ bounds and the wording are the same everywhere:
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import reprlib
 import zipfile
+import zlib
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -351,10 +353,11 @@ class NpzFile:
                     raise InputError(f"{where} has shape {found}: more than {self.max_elements:,} values",
                                      self.hint)
             with self._zip.open(f"{name}.npy") as member:
-                return np.lib.format.read_array(member, allow_pickle=False)
+                data = member.read()  # to its end, so that zipfile checks the CRC-32 (a flipped bit shows)
+            return np.lib.format.read_array(io.BytesIO(data), allow_pickle=False)
         except InputError:
             raise
-        except (ValueError, OSError, EOFError, zipfile.BadZipFile, KeyError, RuntimeError) as err:
+        except (ValueError, OSError, EOFError, zipfile.BadZipFile, KeyError, RuntimeError, zlib.error) as err:
             raise InputError(f"{where} cannot be read ({_reason(err)}): a damaged {self.what}", self.hint) from None
 
     def floats(self, name: str, shape: Sequence[int | None], finite: bool = True) -> NDArray[np.float64]:

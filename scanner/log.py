@@ -311,9 +311,8 @@ class ScanLog:
 
     def _numbers(self, table: str, columns: tuple[str, ...], rows: list[tuple[Any, ...]]) -> np.ndarray:
         """rows as a float64 table (NULL -> NaN); text or blobs in a number column are refused, naming it."""
-        try:
-            return np.array([[np.nan if v is None else v for v in r] for r in rows], dtype=np.float64).reshape(
-                len(rows), len(columns))
+        try:  # NULL (None) becomes NaN
+            return np.array(rows, dtype=np.float64).reshape(len(rows), len(columns))
         except (ValueError, TypeError, OverflowError):
             for r in rows:
                 for c, v in zip(columns, r, strict=True):

@@ -279,7 +279,8 @@ def flip_member_data(data: bytes, picker: Picker) -> tuple[bytes, str]:
         info = pick(picker, [i for i in z.infolist() if i.compress_size > 0])
     name_len, extra_len = struct.unpack("<HH", data[info.header_offset + 26:info.header_offset + 30])
     start = info.header_offset + 30 + name_len + extra_len
-    at = start + picker.integer(0, info.compress_size - 1)
+    # not the first byte (a lone block's BFINAL bit: the data read the same) nor the last (padding bits)
+    at = start + picker.integer(min(1, info.compress_size - 1), max(0, info.compress_size - 2))
     flipped = bytearray(data)
     flipped[at] ^= 1 << picker.integer(0, 7)
     return bytes(flipped), f"a bit of {info.filename} flipped at byte {at}"
@@ -395,8 +396,8 @@ def build_fixture(root: Path) -> Fixture:
                     "T_world_from_camera_0": np.eye(4)}
     images = root / "images"
     images.mkdir()
-    board = np.kron((np.indices((7, 10)).sum(axis=0) % 2).astype(np.uint8) * 255, np.ones((40, 40), np.uint8))
-    photo = np.pad(board, 40, constant_values=255)
+    board = np.kron((np.indices((7, 10)).sum(axis=0) % 2).astype(np.uint8) * 255, np.ones((8, 8), np.uint8))  # small: quick to search
+    photo = np.pad(board, 8, constant_values=255)
     for k in range(3):
         cv2.imwrite(str(images / f"view{k}.png"), photo)
     left, right = root / "left.png", root / "right.png"
