@@ -396,7 +396,8 @@ def build_fixture(root: Path) -> Fixture:
                     "T_world_from_camera_0": np.eye(4)}
     images = root / "images"
     images.mkdir()
-    board = np.kron((np.indices((7, 10)).sum(axis=0) % 2).astype(np.uint8) * 255, np.ones((8, 8), np.uint8))  # small: quick to search
+    # a 9x6 chessboard of 8-pixel squares: small, so that a search in the valid images is quick
+    board = np.kron((np.indices((7, 10)).sum(axis=0) % 2).astype(np.uint8) * 255, np.ones((8, 8), np.uint8))
     photo = np.pad(board, 8, constant_values=255)
     for k in range(3):
         cv2.imwrite(str(images / f"view{k}.png"), photo)

@@ -86,5 +86,5 @@ def test_npz_headers_are_checked_before_the_data_are_read(tmp_path) -> None:
         with pytest.raises(InputError, match="missing"):
             npz.array("other")
     path.write_bytes(path.read_bytes()[:-30])
-    with pytest.raises(InputError, match="not an .npz test file"):
+    with pytest.raises(InputError, match=r"not an \.npz test file"):
         inputs.NpzFile(path, "test file")
