@@ -251,7 +251,7 @@ def float_array(source: str, where: str, value: Any, shape: Sequence[int | None]
     integers too large for a float are refused."""
     dims = "x".join("n" if s is None else str(s) for s in shape)
     units = f", {unit}" if unit else ""
-    expected = f"must be a list of {dims} numbers{units}"
+    expected = f"must be a list of {'' if dims == 'n' else dims + ' '}numbers{units}"
     if not isinstance(value, list) and not (isinstance(value, np.ndarray) and value.dtype.kind in "iuf"):
         raise fail(source, where, value, expected, hint)
     if len(value) > max_rows:
