@@ -28,8 +28,9 @@ class Interrupted(Exception):  # noqa: N818 - what a person sees: "interrupted"
     line and exits with status 130."""
 
 
-def progress_bar() -> Progress:
-    """A progress bar with count, elapsed time and an estimate of the time left (on stderr)."""
+def progress_bar(auto_refresh: bool = True) -> Progress:
+    """A progress bar with count, elapsed time and an estimate of the time left (on stderr). auto_refresh=False:
+    redrawn at each step, with no thread of its own."""
     return Progress(
         TextColumn("[bold]{task.description}"),
         BarColumn(),
@@ -39,10 +40,13 @@ def progress_bar() -> Progress:
         TimeRemainingColumn(),
         console=err_console,
         transient=False,
+        auto_refresh=auto_refresh,
     )
 
 
 def track(items: Iterable[T], description: str, total: int | None = None) -> Iterator[T]:
-    """Iterate with a progress bar."""
-    with progress_bar() as bar:
+    """Iterate with a progress bar. Redrawn at each item, without rich's refresh threads: a loop left by an
+    exception leaves this generator to be closed by the garbage collector, at any moment, and closing one that
+    joins a refresh thread then deadlocks when it happens inside rich's own lock (seen in calibrate camera)."""
+    with progress_bar(auto_refresh=False) as bar:
         yield from bar.track(items, total=total, description=description)

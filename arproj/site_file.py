@@ -44,6 +44,7 @@ import yaml
 from numpy.typing import NDArray
 
 from geometry.errors import InputError
+from geometry.inputs import fail, float_array, load_document, number, text
 from geometry.poses import invert, make_pose
 from scanner.laser import ROOM_KEYS, LaserConfig
 from scanner.wall import Wall
@@ -51,6 +52,7 @@ from wallpose.pose import RoomMap, wall_frames
 
 FORMAT = "arproj-site/1"
 RESCAN = "scan the wall again with `arproj scan ... --site FILE`, or fix the file by hand"
+MAX_M = 1000.0  # any length or coordinate of a site, metres
 DIMENSIONS = ("width", "depth", "height")  # the room's, in scanner.laser.ROOM_KEYS order
 
 
@@ -189,16 +191,7 @@ def site_wall_from_scan(key: str, wall: Wall, rooms: list[dict[str, float]], fra
 # -- reading ---------------------------------------------------------------------------------------------------
 def _load_document(path: Path) -> dict[str, Any]:
     """The site file's top level, checked to be one; InputError (one line) otherwise."""
-    try:
-        document = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such site file", "scan the site with `arproj scan ... --site FILE`") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise InputError(f"{path}: cannot read the site file ({err})") from None
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise InputError(f"{path}: not valid YAML{where}", RESCAN) from None
+    document = load_document(path, "site file", "scan the site with `arproj scan ... --site FILE`")
     if not isinstance(document, dict) or document.get("format") != FORMAT:
         found = document.get("format") if isinstance(document, dict) else type(document).__name__
         raise InputError(f"{path}: format = {found!r}, not a site file ({FORMAT})",
@@ -218,9 +211,7 @@ class _Fields:
         self.entry = entry
 
     def fail(self, name: str, value: Any, what: str) -> None:
-        text = repr(value)
-        text = text if len(text) <= 60 else text[:57] + "..."
-        raise InputError(f"{self.path}: walls.{self.key}{'.' + name if name else ''} = {text}: {what}", RESCAN)
+        raise fail(str(self.path), f"walls.{self.key}{'.' + name if name else ''}", value, what, RESCAN)
 
     def get(self, name: str) -> Any:
         node: Any = self.entry
@@ -233,29 +224,20 @@ class _Fields:
 
     def number(self, name: str, positive: bool = False, non_negative: bool = False) -> float:
         value = self.get(name)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            self.fail(name, value, "expected a finite number")
-        if (positive and value <= 0) or (non_negative and value < 0):
+        v = number(str(self.path), f"walls.{self.key}.{name}", value, -MAX_M, MAX_M, hint=RESCAN)
+        if (positive and v <= 0) or (non_negative and v < 0):
             self.fail(name, value, "must be positive" if positive else "must not be negative")
-        return float(value)
+        return v
 
     def text(self, name: str) -> str:
-        value = self.get(name)
-        if not isinstance(value, str) or not value:
+        value = text(str(self.path), f"walls.{self.key}.{name}", self.get(name), hint=RESCAN)
+        if not value:
             self.fail(name, value, "expected a text")
-        return str(value)
+        return value
 
     def array(self, name: str, shape: tuple[int, ...]) -> NDArray[np.float64]:
-        value = self.get(name)
-        try:
-            out = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            out = np.zeros(0)
-        if out.ndim != len(shape) or any(s not in (-1, n) for s, n in zip(shape, out.shape, strict=False)) \
-                or not np.all(np.isfinite(out)):
-            what = "x".join("n" if s < 0 else str(s) for s in shape)
-            self.fail(name, value, f"expected a finite {what} list of numbers")
-        return out
+        return float_array(str(self.path), f"walls.{self.key}.{name}", self.get(name),
+                           [None if s < 0 else s for s in shape], -MAX_M, MAX_M, max_rows=1000, hint=RESCAN)
 
 
 def _read_wall(path: Path, key: str, entry: Any) -> SiteWall:

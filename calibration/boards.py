@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from calibration.defaults import DEFAULT_BOARD as DEFAULT_BOARD  # re-exported
 from geometry.errors import InputError
+from geometry.inputs import read_image
 
 # Subpixel refinement: half-window = this fraction of the local corner spacing, clipped to the range below.
 SUBPIX_WINDOW_FRACTION = 0.25
@@ -155,13 +156,7 @@ class BoardView:
 
 def read_gray(path: str | Path) -> NDArray[np.uint8]:
     """Read an image file as uint8 grey; InputError naming the file when it cannot be read."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such image file")
-    img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    if img is None:
-        raise InputError(f"{path}: not a readable image", "remove it or replace it with a JPEG/PNG capture")
-    return np.asarray(img, dtype=np.uint8)
+    return read_image(path, "image file")
 
 
 def as_gray(image: NDArray, channel_order: Literal["bgr", "rgb"] = "bgr") -> NDArray[np.uint8]:

@@ -13,6 +13,7 @@ from calibration.boards import Board, BoardView, detect_file
 from geometry.errors import InputError
 
 T = TypeVar("T")
+MAX_IMAGES = 5000  # images of one capture set (a calibration uses 20 to 100)
 Tracker = Callable[[Iterable[T], str, int], Iterator[T]]
 
 
@@ -24,6 +25,9 @@ def _plain_iter(items: Iterable[T], description: str, total: int) -> Iterator[T]
 def expand(pattern: str, what: str) -> list[Path]:
     """Files matching a glob pattern, sorted by name; InputError when there are none."""
     files = sorted(Path(p) for p in glob.glob(str(Path(pattern).expanduser())) if Path(p).is_file())
+    if len(files) > MAX_IMAGES:
+        raise InputError(f"{what}: {len(files):,} files match {pattern!r}; a calibration takes at most "
+                         f"{MAX_IMAGES:,}", "narrow the pattern to the capture set")
     if not files:
         raise InputError(f"{what}: no files match {pattern!r}",
                          "check the folder and quote the pattern so the shell does not expand it")

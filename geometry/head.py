@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import InputError
+from geometry.inputs import float_array
 from geometry.poses import make_pose, rotation_matrices
 
 JOINT_NAMES = ("pan", "tilt", "roll")
@@ -61,11 +62,12 @@ class HeadModel:
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "head model") -> HeadModel:
-        try:
-            return cls(axes=d["axes"], points=d["points_m"],
-                       T_robot_from_projector_zero=np.asarray(d["T_robot_from_projector_zero"], dtype=float),
-                       zero_offsets_deg=d.get("zero_offsets_deg", [0.0, 0.0, 0.0]))
-        except KeyError as err:
-            raise InputError(f"{source}: key {err.args[0]!r} is missing") from None
-        except (TypeError, ValueError) as err:
-            raise InputError(f"{source}: malformed ({err})") from None
+        for key in ("axes", "points_m", "T_robot_from_projector_zero"):
+            if key not in d:
+                raise InputError(f"{source}: key {key!r} is missing")
+        return cls(axes=float_array(source, "axes", d["axes"], (3, 3), -10.0, 10.0),
+                   points=float_array(source, "points_m", d["points_m"], (3, 3), -100.0, 100.0, unit="metres"),
+                   T_robot_from_projector_zero=float_array(source, "T_robot_from_projector_zero",
+                                                           d["T_robot_from_projector_zero"], (4, 4), -100.0, 100.0),
+                   zero_offsets_deg=float_array(source, "zero_offsets_deg", d.get("zero_offsets_deg", [0.0] * 3),
+                                                (3,), -360.0, 360.0, unit="degrees"))

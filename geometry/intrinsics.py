@@ -13,10 +13,10 @@ from typing import Any
 
 import cv2
 import numpy as np
-import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import InputError
+from geometry.inputs import fail, float_array, integer, load_document
 
 
 @dataclass(frozen=True)
@@ -110,6 +110,7 @@ class Intrinsics:
         return np.column_stack([self.fx * rays[:, 0] + self.cx, self.fy * rays[:, 1] + self.cy])
 
 
+MAX_PIXELS = 16384  # an image side (and a bound on K's entries): larger is no camera or beamer of this system
 _DISTORTION_MODEL = {4: "plumb_bob", 5: "plumb_bob", 8: "rational_polynomial"}
 
 
@@ -145,16 +146,12 @@ def read_camera_info(path: str | Path) -> Intrinsics:
     Raises InputError naming the file and the key when the file is missing, not YAML, or incomplete.
     """
     path = Path(path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such camera_info file",
-                         "pass the YAML written by `arproj calibrate` or ROS camera_calibration") from None
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
-        raise InputError(f"{path}: not valid YAML ({str(err).splitlines()[0]})",
-                         "fix the file or recalibrate") from None
+    source = str(path)
+    doc = load_document(path, "camera_info file", "pass the YAML written by `arproj calibrate` or ROS "
+                        "camera_calibration")
     if not isinstance(doc, dict):
-        raise InputError(f"{path}: expected a camera_info mapping with image_width, camera_matrix, …")
+        raise InputError(f"{path}: expected a camera_info mapping with image_width, camera_matrix, …",
+                         "fix the file or recalibrate")
 
     def get(key: str) -> Any:  # a YAML value, checked where it is used
         if key not in doc:
@@ -166,24 +163,18 @@ def read_camera_info(path: str | Path) -> Intrinsics:
     def matrix(key: str, rows: int | None, cols: int | None) -> NDArray[np.float64]:
         m = get(key)
         if not isinstance(m, dict) or "data" not in m:
-            raise InputError(f"{path}: {key} must have rows, cols and data")
-        try:
-            data = np.asarray(m["data"], dtype=np.float64)
-        except (TypeError, ValueError):
-            raise InputError(f"{path}: {key}.data must be a list of numbers, got {m['data']!r}") from None
-        r = int(m.get("rows", rows or 1))
-        c = int(m.get("cols", cols or data.size))
+            raise fail(source, key, m, "must have rows, cols and data", "fix the file or recalibrate")
+        data = float_array(source, f"{key}.data", m["data"], (None,), -MAX_PIXELS, MAX_PIXELS, max_rows=64,
+                           hint="fix the file or recalibrate")
+        r = integer(source, f"{key}.rows", m.get("rows", rows or 1), 1, 64)
+        c = integer(source, f"{key}.cols", m.get("cols", cols or data.size), 1, 64)
         if data.size != r * c or (rows is not None and r != rows) or (cols is not None and c != cols):
             raise InputError(f"{path}: {key} has {data.size} values for rows={r}, cols={c}"
                              + (f"; expected {rows}x{cols}" if rows and cols else ""))
-        if not np.all(np.isfinite(data)):
-            raise InputError(f"{path}: {key} contains a value that is not a finite number")
         return data.reshape(r, c)
 
-    try:
-        width, height = int(get("image_width")), int(get("image_height"))
-    except (TypeError, ValueError):
-        raise InputError(f"{path}: image_width and image_height must be integers") from None
+    width = integer(source, "image_width", get("image_width"), 1, MAX_PIXELS, "fix the file or recalibrate")
+    height = integer(source, "image_height", get("image_height"), 1, MAX_PIXELS, "fix the file or recalibrate")
     K = matrix("camera_matrix", 3, 3)
     dist = matrix("distortion_coefficients", None, None).ravel()
     model = doc.get("distortion_model", "plumb_bob")
@@ -193,6 +184,9 @@ def read_camera_info(path: str | Path) -> Intrinsics:
     if model == "equidistant":
         raise InputError(f"{path}: the fisheye (equidistant) model is not supported",
                          "recalibrate with plumb_bob or rational_polynomial")
+    if not np.allclose(K[2], [0, 0, 1]):
+        raise fail(source, "camera_matrix.data", K.ravel().tolist(), "is not a camera matrix [fx 0 cx; 0 fy cy; "
+                   "0 0 1]", "fix the file or recalibrate")
     if K[0, 0] <= 0 or K[1, 1] <= 0:
         raise InputError(f"{path}: camera_matrix has non-positive focal length fx={K[0, 0]}, fy={K[1, 1]}")
     try:

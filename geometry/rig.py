@@ -32,11 +32,13 @@ from geometry import provenance
 from geometry.errors import InputError
 from geometry.frames import parse_pose_name
 from geometry.head import HeadModel
+from geometry.inputs import fail, float_array, load_document, mapping
 from geometry.intrinsics import Intrinsics, read_camera_info, write_camera_info
 from geometry.plain import plain
 from geometry.poses import invert
 
 RIG_FILE = "rig.yaml"
+MAX_TRANSLATION_M = 100.0  # poses within one rig and its robot: farther is no rig
 STEREO_POSE = "T_camera_right_from_camera_left"
 # ROS camera_calibration's default: the rectified images keep only valid pixels (no black borders).
 RECTIFY_ALPHA = 0.0
@@ -116,26 +118,36 @@ class Rig:
         folder = Path(folder)
         path = folder / RIG_FILE if folder.is_dir() else folder
         folder = path.parent
+        source = str(path)
+        hint = "run `arproj calibrate` to make one, or pass --sim"
         if not path.exists():
-            raise InputError(f"{path}: no rig file here", "run `arproj calibrate` to make one, or pass --sim")
-        try:
-            doc = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as err:
-            raise InputError(f"{path}: not valid YAML ({str(err).splitlines()[0]})") from None
-        if not isinstance(doc, dict) or doc.get("version") != 1:
-            raise InputError(f"{path}: not an arproj rig file (expected 'version: 1')")
-        rig = cls(quality=doc.get("quality") or {})
-        for device, name in (doc.get("intrinsics") or {}).items():
+            raise InputError(f"{path}: no rig file here", hint)
+        doc = load_document(path, "rig file", hint)
+        if not isinstance(doc, dict) or doc.get("version") != 1 or isinstance(doc.get("version"), bool):
+            raise InputError(f"{path}: not an arproj rig file (expected 'version: 1')", hint)
+        quality = doc.get("quality") or {}
+        rig = cls(quality=mapping(source, "quality", quality, "a mapping of figures", hint))
+        files = mapping(source, "intrinsics", doc.get("intrinsics") or {}, "a mapping device: camera_info file",
+                        hint)
+        for device, name in files.items():
+            where = f"intrinsics.{device}"
+            if not isinstance(device, str) or not (isinstance(name, str) and name):
+                raise fail(source, where, name, "must be the name of a camera_info file beside the rig file", hint)
             rig.intrinsics[device] = read_camera_info(folder / name)
-        for name, value in (doc.get("poses") or {}).items():
+        for name, value in mapping(source, "poses", doc.get("poses") or {}, "a mapping of named 4x4 poses",
+                                   hint).items():
+            if not isinstance(name, str):
+                raise fail(source, "poses", name, "pose names are text, e.g. T_robot_from_camera_left", hint)
             parse_pose_name(name)
-            T = np.asarray(value, dtype=np.float64)
-            if T.shape != (4, 4) or not np.allclose(T[3], [0, 0, 0, 1]) or not np.all(np.isfinite(T)):
-                raise InputError(f"{path}: pose {name} is not a 4x4 rigid transform")
+            T = float_array(source, f"poses.{name}", value, (4, 4), -MAX_TRANSLATION_M, MAX_TRANSLATION_M,
+                            unit="metres", hint=hint)
+            if not np.allclose(T[3], [0, 0, 0, 1]):
+                raise InputError(f"{path}: pose {name} is not a 4x4 rigid transform", hint)
             R = T[:3, :3]
             if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
-                raise InputError(f"{path}: pose {name} has a rotation part that is not a rotation")
+                raise InputError(f"{path}: pose {name} has a rotation part that is not a rotation", hint)
             rig.poses[name] = T
         if doc.get("head") is not None:
-            rig.head = HeadModel.from_dict(doc["head"], source=f"{path}: head")
+            rig.head = HeadModel.from_dict(mapping(source, "head", doc["head"], "a head model mapping", hint),
+                                           source=f"{path}: head")
         return rig

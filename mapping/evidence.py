@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import InputError
+from geometry.inputs import NpzFile
 from mapping import tolerances as tol
 from mapping.grid import GridInfo, WallGrid
 from mapping.map_object import MapObject
@@ -463,25 +464,24 @@ class Coverage:
             raise InputError(f"{path}: no coverage layer beside the map",
                              "this map folder was written before coverage was recorded: run `arproj map` on the "
                              "scan log again; without it no point can be judged")
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                fmt = str(z["format"])
-                names = [str(c) for c in z["channels"]]
-                res, w, h, ox, oy = (float(v) for v in z["info"])
-                bounds = tuple(float(v) for v in z["bounds"])
-                covered, response = z["covered"], z["response"]
-        except (OSError, KeyError, ValueError) as err:
-            raise InputError(f"{path}: not a readable coverage layer ({err})", "run `arproj map` again") from None
-        if fmt != FORMAT:
-            raise InputError(f"{path}: format {fmt!r}, expected {FORMAT!r}", "run `arproj map` again")
-        if not (np.isfinite(res) and res > 0 and 0 < w <= 100_000 and 0 < h <= 100_000):
-            raise InputError(f"{path}: grid info {res, w, h} is not a grid", "run `arproj map` again")
+        hint = "run `arproj map` again"
+        with NpzFile(path, "coverage layer", hint) as z:
+            fmt = str(z.array("format", ndim=0, kinds="U"))
+            names = [str(c) for c in z.array("channels", ndim=1, kinds="U")]
+            res, w, h, ox, oy = (float(v) for v in z.floats("info", (5,)))
+            bounds = tuple(float(v) for v in z.floats("bounds", (4,)))
+            if not (res > 0 and 0 < w <= 100_000 and 0 < h <= 100_000 and w == int(w) and h == int(h)):
+                raise InputError(f"{path}: grid info {res, w, h} is not a grid", hint)
+            shape = (len(names), int(h), int(w))
+            if fmt != FORMAT:
+                raise InputError(f"{path}: format {fmt!r}, expected {FORMAT!r}", hint)
+            if not 0 < len(names) <= 16:
+                raise InputError(f"{path}: {len(names)} channels; a coverage layer has 1 to 16", hint)
+            covered = z.array("covered", kinds="ub", shape=shape)
+            response = z.array("response", kinds="ub", shape=shape)
         if len(bounds) != 4 or not np.all(np.isfinite(bounds)) or bounds[2] <= bounds[0] or bounds[3] <= bounds[1]:
             raise InputError(f"{path}: wall bounds {bounds} are not a rectangle", "run `arproj map` again")
         info = GridInfo(res, int(w), int(h), ox, oy)
-        shape = (len(names), info.height, info.width)
-        if covered.shape != shape or response.shape != shape:
-            raise InputError(f"{path}: layers of shape {covered.shape}, {response.shape}, expected {shape}")
         return cls(info, {c: covered[k].astype(bool) for k, c in enumerate(names)},
                    {c: response[k].astype(bool) for k, c in enumerate(names)}, bounds)
 

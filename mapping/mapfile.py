@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from geometry import provenance
 from geometry.errors import InputError
+from geometry.inputs import float_array, load_document, number
 
 FORMAT = "arproj-objects/2"
 FILE_NAME = "objects.json"
@@ -44,6 +45,8 @@ DEFAULT_SIGMA_M = 0.003  # position σ of a mapped object when objects.json give
 MIN_CONFIDENCE_FOR_SIGMA = 0.25  # σ grows as 1/confidence, down to this confidence
 MAX_OBJECTS = 100_000  # more is no map of one wall: refuse before allocating
 MAX_POINTS = 1_000_000
+MAX_FILE_BYTES = 256 * 2**20
+OUTSIDE_MARGIN_M = 0.05  # how far past the wall's edge a mapped object may reach (a line's end, a band)
 
 
 @dataclass
@@ -124,12 +127,7 @@ def _is_ring(cls: str, points: NDArray[np.float64]) -> bool:
 
 
 def _finite_number(where: str, key: str, value: object, lo: float, hi: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"{where}: {key} must be a number, got {value!r}")
-    v = float(value)
-    if not (math.isfinite(v) and lo <= v <= hi):
-        raise InputError(f"{where}: {key} = {value!r} is outside {lo:g}…{hi:g}")
-    return v
+    return number(where, key, value, lo, hi)
 
 
 def _optional_number(where: str, key: str, value: object, lo: float, hi: float) -> float | None:
@@ -147,15 +145,10 @@ def parse_object(item: object, where: str) -> MappedObject:
     cls = alias or cls
     if cls not in MAP_CLASSES:
         raise InputError(f"{where}: class {cls!r} is unknown", f"use one of {', '.join(MAP_CLASSES)}")
-    raw_points = item.get("points_m")
-    if not isinstance(raw_points, list) or not raw_points or len(raw_points) > MAX_POINTS:
+    points = float_array(where, "points_m", item.get("points_m"), (None, 2), -1e3, 1e3, max_rows=MAX_POINTS,
+                         unit="metres")
+    if not len(points):
         raise InputError(f"{where}: points_m must be a list [[x, y], …] of 1 to {MAX_POINTS} points")
-    try:
-        points = np.asarray(raw_points, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InputError(f"{where}: points_m must be [[x, y], …] in metres") from None
-    if points.ndim != 2 or points.shape[1] != 2 or not np.all(np.isfinite(points)) or np.abs(points).max() > 1e3:
-        raise InputError(f"{where}: points_m must be [[x, y], …], finite, in metres (|value| ≤ 1000)")
     if "width_m" not in item:
         raise InputError(f"{where}: key 'width_m' is missing")
     width = _finite_number(where, "width_m", item["width_m"], 0.0, 10.0)
@@ -182,13 +175,8 @@ def parse_object(item: object, where: str) -> MappedObject:
 def read_objects(path: str | Path) -> list[MappedObject]:
     """objects.json → its objects; InputError names the file, the object and the problem."""
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such objects file", "pass the folder written by `arproj map … --out DIR`") \
-            from None
-    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as err:
-        raise InputError(f"{path}: not valid JSON ({type(err).__name__})", "re-export it with `arproj map`") from None
+    doc = load_document(path, "objects file", "pass the folder written by `arproj map … --out DIR`",
+                        max_bytes=MAX_FILE_BYTES)
     if not isinstance(doc, dict) or not isinstance(doc.get("objects"), list):
         raise InputError(f"{path}: expected {{\"objects\": [...]}}")
     if doc.get("format", FORMAT) not in (FORMAT, "arproj-objects/1"):
@@ -196,6 +184,22 @@ def read_objects(path: str | Path) -> list[MappedObject]:
     if len(doc["objects"]) > MAX_OBJECTS:
         raise InputError(f"{path}: {len(doc['objects'])} objects; a wall map has at most {MAX_OBJECTS}")
     return [parse_object(item, f"{path}: objects[{i}]") for i, item in enumerate(doc["objects"])]
+
+
+def check_objects_within(objects: list[MappedObject], bounds: tuple[float, float, float, float],
+                         path: str | Path, margin_m: float = OUTSIDE_MARGIN_M) -> None:
+    """InputError when an object lies off the wall its map folder's coverage layer covers (bounds x0, y0, x1, y1,
+    metres): objects.json from another wall's map."""
+    x0, y0, x1, y1 = bounds
+    for i, obj in enumerate(objects):
+        p = obj.points_m
+        outside = (p[:, 0] < x0 - margin_m) | (p[:, 0] > x1 + margin_m) | (p[:, 1] < y0 - margin_m) | \
+            (p[:, 1] > y1 + margin_m)
+        if outside.any():
+            at = p[np.argmax(outside)].round(3).tolist()
+            raise InputError(f"{path}: objects[{i}] ({obj.cls}) has a point at {at} m, off the mapped wall "
+                             f"({x0:g}..{x1:g} x {y0:g}..{y1:g} m): objects.json from "
+                             "another map?", "use the objects.json written with this map by `arproj map`")
 
 
 def objects_document(objects: list[MappedObject], scanned_regions: list[dict] | None = None) -> dict:

@@ -20,6 +20,7 @@ import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import InputError
+from geometry.inputs import NpzFile
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, make_pose, transform_points
 from mapping import tolerances as tol
@@ -166,6 +167,9 @@ def flat_wall_mesh(x_min: float, y_min: float, x_max: float, y_max: float, step_
     return trimesh.Trimesh(vertices=verts, faces=faces, process=False)
 
 
+MAX_RANGE_VIEWS = 1000
+MAX_RANGE_PIXELS = 4096  # per side of one range image
+MAX_RANGE_M = 100.0      # depths and camera positions, metres
 RangeView = tuple[NDArray[np.float64], Intrinsics, NDArray[np.float64]]  # depth (h, w), intr, T_world_from_camera
 
 
@@ -176,30 +180,38 @@ def load_range_images(path: str) -> tuple[list[RangeView], NDArray[np.float64] |
     from pathlib import Path
 
     p = Path(path)
-    try:
-        z = np.load(p)
-    except FileNotFoundError:
-        raise InputError(f"{p}: range image file not found") from None
-    except (OSError, ValueError) as err:
-        raise InputError(f"{p}: not an .npz file of range images ({err})") from None
+    hint = "store depth_0, K_0, T_world_from_camera_0, … (metres, OpenCV camera frame)"
     views: list[RangeView] = []
-    k = 0
-    while f"depth_{k}" in z:
-        for key in (f"K_{k}", f"T_world_from_camera_{k}"):
-            if key not in z:
-                raise InputError(f"{p}: {key} is missing for depth_{k}",
-                                 "each depth_k needs K_k (3x3) and T_world_from_camera_k (4x4)")
-        depth = np.asarray(z[f"depth_{k}"], dtype=np.float64)
-        K = np.asarray(z[f"K_{k}"], dtype=np.float64)
-        T = np.asarray(z[f"T_world_from_camera_{k}"], dtype=np.float64)
-        if depth.ndim != 2 or K.shape != (3, 3) or T.shape != (4, 4):
-            raise InputError(f"{p}: view {k} has depth {depth.shape}, K {K.shape}, T {T.shape}; expected "
-                             "(h, w), (3, 3), (4, 4)")
-        views.append((depth, Intrinsics.from_K(K, depth.shape[1], depth.shape[0]), T))
-        k += 1
-    if not views:
-        raise InputError(f"{p}: no depth_0 array", "store depth_0, K_0, T_world_from_camera_0, …")
-    T_wall = np.asarray(z["T_world_from_wall"], dtype=np.float64) if "T_world_from_wall" in z else None
+    with NpzFile(p, "range image file", hint) as z:
+        k = 0
+        while f"depth_{k}" in z:
+            for key in (f"K_{k}", f"T_world_from_camera_{k}"):
+                if key not in z:
+                    raise InputError(f"{p}: {key} is missing for depth_{k}",
+                                     "each depth_k needs K_k (3x3) and T_world_from_camera_k (4x4)")
+            if k >= MAX_RANGE_VIEWS:
+                raise InputError(f"{p}: more than {MAX_RANGE_VIEWS} range images", hint)
+            depth = z.floats(f"depth_{k}", (None, None), finite=False)  # NaN: no return
+            if not (0 < depth.shape[0] <= MAX_RANGE_PIXELS and 0 < depth.shape[1] <= MAX_RANGE_PIXELS):
+                raise InputError(f"{p}: depth_{k} is {depth.shape[1]}x{depth.shape[0]} pixels; a range image has "
+                                 f"1 to {MAX_RANGE_PIXELS} per side", hint)
+            valid = depth[np.isfinite(depth)]
+            if (np.isinf(depth).any() or (valid < 0).any() or (valid > MAX_RANGE_M).any()):
+                raise InputError(f"{p}: depth_{k} holds depths outside 0..{MAX_RANGE_M:g} m (NaN or 0: no return)",
+                                 hint)
+            K = z.floats(f"K_{k}", (3, 3))
+            T = z.floats(f"T_world_from_camera_{k}", (4, 4))
+            if np.abs(T[:3, 3]).max() > MAX_RANGE_M or not np.allclose(T[3], [0, 0, 0, 1]):
+                raise InputError(f"{p}: T_world_from_camera_{k} is not a pose within {MAX_RANGE_M:g} m", hint)
+            try:
+                intr = Intrinsics.from_K(K, depth.shape[1], depth.shape[0])
+            except InputError as err:
+                raise InputError(f"{p}: K_{k}: {err.message}", hint) from None
+            views.append((depth, intr, T))
+            k += 1
+        if not views:
+            raise InputError(f"{p}: no depth_0 array", hint)
+        T_wall = z.floats("T_world_from_wall", (4, 4)) if "T_world_from_wall" in z else None
     return views, T_wall
 
 

@@ -84,6 +84,7 @@ import numpy as np
 
 from geometry import provenance
 from geometry.errors import InputError
+from geometry.inputs import fail, float_array, is_number, parse_json, shown
 from scanner.channels import NAMES as CHANNEL_NAMES
 from scanner.laser import LASER_KEYS
 
@@ -121,6 +122,11 @@ CREATE INDEX IF NOT EXISTS samples_by_pass ON samples(pass_id);
 """
 
 
+REWRITE_HINT = "the log was changed by something other than arproj: scan again, or restore a copy"
+MAX_META = 1000  # meta entries read; a log has about twenty
+MAX_OUTSIDE_M = 5.0  # how far outside the wall a logged position may lie (a frame's localisation is off by cm)
+MAX_DRIVE_M = 10.0   # drive travel, metres (the xy drives reach about 2 m)
+MAX_READING = 10.0   # readings are display units 0..1; this far off is no reading
 SQLITE_CORRUPT = 11  # SQLite's primary result code for a damaged database file
 
 
@@ -199,7 +205,7 @@ class ScanLog:
         self._lock = lock
         self.meta = self._read_meta()
         # columns the frames table really has (a version 1 log lacks the laser columns)
-        present = {r[1] for r in connection.execute("PRAGMA table_info(frames)")}
+        present = {r[1] for r in self._rows("PRAGMA table_info(frames)")}
         self._frame_columns = tuple(c for c in FRAME_COLUMNS if c in present) if present else FRAME_COLUMNS
 
     # ------------------------------------------------------------------ opening
@@ -255,7 +261,11 @@ class ScanLog:
             if not {"meta", "frames", "passes", "samples"} <= names:
                 db.close()
                 raise InputError(f"{path}: not a scan log (tables meta/frames/passes/samples missing)")
-            log = cls(path, db, writable, lock)
+            try:
+                log = cls(path, db, writable, lock)
+            except BaseException:
+                db.close()
+                raise
             if log.meta.get("format") not in READABLE_FORMATS:
                 log.close()
                 raise InputError(f"{path}: meta format = {log.meta.get('format')!r}, expected one of "
@@ -280,9 +290,51 @@ class ScanLog:
 
     def _read_meta(self) -> dict[str, Any]:
         try:
-            return {k: json.loads(v) for k, v in self._db.execute("SELECT key, value FROM meta")}
+            rows = self._db.execute("SELECT key, value FROM meta").fetchall()
         except sqlite3.OperationalError:
             return {}
+        except sqlite3.DatabaseError as err:
+            raise _database_error(self.path, err) from None
+        meta = {}
+        for key, value in rows[:MAX_META]:
+            where = f"{self.path}: meta {shown(key)}"
+            if not isinstance(key, str) or not isinstance(value, str):
+                raise InputError(f"{where} = {shown(value)}: not a JSON text", REWRITE_HINT)
+            meta[key] = parse_json(value, where, REWRITE_HINT, constants=True)  # json.dumps writes NaN
+        return meta
+
+    def _rows(self, query: str, params: list[Any] | tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
+        """A query's rows; a damaged or foreign file is an InputError naming the log, not a traceback."""
+        try:
+            return self._db.execute(query, params).fetchall()
+        except sqlite3.DatabaseError as err:
+            raise _database_error(self.path, err) from None
+
+    def _numbers(self, table: str, columns: tuple[str, ...], rows: list[tuple[Any, ...]]) -> np.ndarray:
+        """rows as a float64 table (NULL -> NaN); text or blobs in a number column are refused, naming it."""
+        try:  # NULL (None) becomes NaN
+            return np.array(rows, dtype=np.float64).reshape(len(rows), len(columns))
+        except (ValueError, TypeError, OverflowError):
+            for r in rows:
+                for c, v in zip(columns, r, strict=True):
+                    if v is not None and not is_number(v):
+                        raise fail(str(self.path), f"{table}.{c}", v, "must be a number", REWRITE_HINT) from None
+            raise InputError(f"{self.path}: table {table} holds values that are not numbers", REWRITE_HINT) from None
+
+    def _check_range(self, table: str, name: str, values: np.ndarray, lo: float, hi: float, what: str) -> None:
+        bad = ~np.isnan(values) & ~((values >= lo) & (values <= hi))
+        if bad.any():
+            raise fail(str(self.path), f"{table}.{name}", float(values[np.argmax(bad)]), f"must be {what} "
+                       f"({lo:g}..{hi:g})", REWRITE_HINT)
+
+    def _wall_box(self) -> tuple[float, float, float, float]:
+        """Where positions on the wall may lie: the wall (from meta) widened by MAX_OUTSIDE_M."""
+        def size(key: str) -> float:
+            value: Any = self.meta.get(key)
+            return float(value) if is_number(value) and 0 < value < 1e3 else 1e3
+
+        w, h = size("wall_width_m"), size("wall_height_m")
+        return -MAX_OUTSIDE_M, -MAX_OUTSIDE_M, w + MAX_OUTSIDE_M, h + MAX_OUTSIDE_M
 
     # ------------------------------------------------------------------ checks
     def check_wall(self, fingerprint: str, wall_source: str = "") -> None:
@@ -344,7 +396,7 @@ class ScanLog:
                                  f"({', '.join('?' * len(SAMPLE_COLUMNS))})", rows)
 
     def next_seq(self) -> int:
-        value = self._db.execute("SELECT MAX(seq) FROM samples").fetchone()[0]
+        value = self._rows("SELECT MAX(seq) FROM samples")[0][0]
         return 0 if value is None else int(value) + 1
 
     # ------------------------------------------------------------------ reading
@@ -355,44 +407,83 @@ class ScanLog:
         if pass_ids is not None:
             query += f" WHERE pass_id IN ({', '.join('?' * len(pass_ids))})"
             params = [int(p) for p in pass_ids]
-        rows = self._db.execute(query + " ORDER BY seq", params).fetchall()
-        table = np.array(rows, dtype=np.float64).reshape(len(rows), len(SAMPLE_COLUMNS)) if rows else \
-            np.zeros((0, len(SAMPLE_COLUMNS)))
-        return {c: (table[:, i].astype(np.int64) if c in INT_SAMPLE_COLUMNS else table[:, i])
-                for i, c in enumerate(SAMPLE_COLUMNS)}
+        rows = self._rows(query + " ORDER BY seq", params)
+        table = self._numbers("samples", SAMPLE_COLUMNS, rows)
+        out = {c: table[:, i] for i, c in enumerate(SAMPLE_COLUMNS)}
+        x0, y0, x1, y1 = self._wall_box()
+        for c in ("cmd_x_m", "x_m", "true_x_m"):
+            self._check_range("samples", c, out[c], x0, x1, "on the wall, metres")
+        for c in ("cmd_y_m", "y_m", "true_y_m"):
+            self._check_range("samples", c, out[c], y0, y1, "on the wall, metres")
+        for c in ("drive_u_m", "drive_v_m"):
+            self._check_range("samples", c, out[c], -MAX_DRIVE_M, MAX_DRIVE_M, "a drive position, metres")
+        for c in CHANNEL_NAMES:
+            self._check_range("samples", c, out[c], -MAX_READING, MAX_READING, "a reading in display units")
+        for c in INT_SAMPLE_COLUMNS:
+            if np.isnan(out[c]).any() or (np.abs(out[c]) > 2**53).any():
+                self._check_range("samples", c, np.where(np.isnan(out[c]), np.inf, out[c]), -2**53, 2**53,
+                                  "an integer")
+            out[c] = out[c].astype(np.int64)
+        return out
 
     def frames(self) -> dict[str, np.ndarray]:
         """Frames ordered by id: arrays per FRAME_COLUMNS (cov_json replaced by cov (n, 3, 3))."""
         cols = self._frame_columns
-        rows = self._db.execute(f"SELECT {', '.join(cols)} FROM frames ORDER BY frame_id").fetchall()
+        rows = self._rows(f"SELECT {', '.join(cols)} FROM frames ORDER BY frame_id")
         out: dict[str, np.ndarray] = {c: np.full(len(rows), np.nan) for c in FRAME_COLUMNS if c not in cols}
-        for i, c in enumerate(cols):
-            if c == "cov_json":
-                out["cov"] = np.array([json.loads(r[i]) for r in rows], dtype=np.float64).reshape(-1, 3, 3)
-            elif c == "frame_id":
-                out[c] = np.array([r[i] for r in rows], dtype=np.int64)
-            else:
-                out[c] = np.array([np.nan if r[i] is None else r[i] for r in rows], dtype=np.float64)
+        k = cols.index("cov_json")
+        numbers = tuple(c for c in cols if c != "cov_json")
+        table = self._numbers("frames", numbers, [r[:k] + r[k + 1:] for r in rows])
+        for i, c in enumerate(numbers):
+            out[c] = table[:, i].astype(np.int64) if c == "frame_id" else table[:, i]
+        covs = []
+        for r in rows:
+            where = f"{self.path}: frames.cov_json of frame {shown(r[0])}"
+            if not isinstance(r[k], str):
+                raise InputError(f"{where} = {shown(r[k])}: not a JSON text", REWRITE_HINT)
+            covs.append(float_array(where, "cov_json", parse_json(r[k], where, REWRITE_HINT), (9,), hint=REWRITE_HINT))
+        out["cov"] = np.array(covs, dtype=np.float64).reshape(-1, 3, 3)
+        x0, y0, x1, y1 = self._wall_box()
+        for prefix in ("cmd", "est", "true"):
+            self._check_range("frames", f"{prefix}_x_m", out[f"{prefix}_x_m"], x0, x1, "on the wall, metres")
+            self._check_range("frames", f"{prefix}_y_m", out[f"{prefix}_y_m"], y0, y1, "on the wall, metres")
         return out
 
     def passes(self) -> dict[str, np.ndarray]:
-        rows = self._db.execute(f"SELECT {', '.join(PASS_COLUMNS)} FROM passes ORDER BY pass_id").fetchall()
+        rows = self._rows(f"SELECT {', '.join(PASS_COLUMNS)} FROM passes ORDER BY pass_id")
         out: dict[str, np.ndarray] = {}
+        texts = ("stage", "axis")
+        numbers = tuple(c for c in PASS_COLUMNS if c not in texts)
+        table = self._numbers("passes", numbers, [tuple(v for c, v in zip(PASS_COLUMNS, r, strict=True)
+                                                        if c not in texts) for r in rows])
         for i, c in enumerate(PASS_COLUMNS):
-            values = [r[i] for r in rows]
-            if c in ("stage", "axis"):
+            if c in texts:
+                values = [r[i] for r in rows]
+                bad = [v for v in values if not isinstance(v, str) or len(v) > 32]
+                if bad:
+                    raise fail(str(self.path), f"passes.{c}", bad[0], "must be a short text", REWRITE_HINT)
                 out[c] = np.array(values, dtype=str)
-            elif c in ("pass_id", "frame_id", "direction", "n_samples"):
-                out[c] = np.array(values, dtype=np.int64)
+        for i, c in enumerate(numbers):
+            if c in ("pass_id", "frame_id", "direction", "n_samples"):
+                self._check_range("passes", c, np.where(np.isnan(table[:, i]), np.inf, table[:, i]), -2**53, 2**53,
+                                  "an integer")
+                out[c] = table[:, i].astype(np.int64)
             else:
-                out[c] = np.array(values, dtype=np.float64)
+                out[c] = table[:, i]
         return out
 
     def pass_count(self) -> int:
-        return int(self._db.execute("SELECT COUNT(*) FROM passes").fetchone()[0])
+        return int(self._rows("SELECT COUNT(*) FROM passes")[0][0])
 
     def frame_ids(self) -> set[int]:
-        return {int(r[0]) for r in self._db.execute("SELECT frame_id FROM frames")}
+        return {int(r[0]) for r in self._rows("SELECT frame_id FROM frames")}
+
+
+def _database_error(path: Path, err: sqlite3.DatabaseError) -> InputError:
+    """What SQLite's error means for a person: a damaged log (salvage can read the rest) or no scan log."""
+    if getattr(err, "sqlite_errorcode", None) == SQLITE_CORRUPT or "malformed" in str(err):
+        return DamagedLogError(f"{path}: the scan log is damaged (SQLite says: {err})", REWRITE_HINT)
+    return InputError(f"{path}: not a readable scan log (SQLite says: {err})", REWRITE_HINT)
 
 
 def _creating_path(path: Path) -> Path:

@@ -80,6 +80,7 @@ import numpy as np
 import yaml
 
 from geometry.errors import InputError
+from geometry.inputs import fail, float_array, load_document, number
 from geometry.polyline import densify, distances_to_polyline, polyline_length
 
 FORMAT = "arproj-wall/1"
@@ -95,6 +96,8 @@ OPENING_KINDS = ("door", "window")
 PLATE_MATERIALS = ("steel", "aluminium", "copper")
 
 INSIDE_TOLERANCE_M = 1e-3
+MAX_POINTS = 100_000  # points of one polyline or outline: more is no object of one wall
+MAX_OBJECTS = 100_000
 MAX_DEPTH_M = 0.30
 
 # Per-kind optional fields and their defaults; required fields are listed in _REQUIRED.
@@ -255,96 +258,82 @@ class Wall:
         return [o for o in self.objects if o.kind in LINE_KINDS]
 
 
-def _fail(source: str, where: str, value: Any, what: str) -> InputError:
-    shown = repr(value)
-    if len(shown) > 80:
-        shown = shown[:77] + "..."
-    return InputError(f"{source}: {where} = {shown}: {what}")
-
-
 def _number(source: str, where: str, value: Any, lo: float, hi: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise _fail(source, where, value, "must be a finite number (metres)")
-    if not lo <= value <= hi:
-        raise _fail(source, where, value, f"must be between {lo:g} and {hi:g}")
-    return float(value)
+    return number(source, where, value, lo, hi, "metres")
 
 
 def _points(source: str, where: str, value: Any, wall_w: float, wall_h: float, min_n: int,
             max_n: int | None = None) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise _fail(source, where, value, "must be a list of [x, y] pairs in metres") from None
-    if arr.ndim != 2 or arr.shape[1] != 2 or not np.all(np.isfinite(arr)):
-        raise _fail(source, where, value, "must be a list of [x, y] pairs in metres")
+    arr = float_array(source, where, value, (None, 2), unit="[x, y] pairs in metres", max_rows=MAX_POINTS)
     if arr.shape[0] < min_n or (max_n is not None and arr.shape[0] > max_n):
         count = f"exactly {min_n}" if max_n == min_n else f"at least {min_n}"
-        raise _fail(source, where, value, f"needs {count} point(s), has {arr.shape[0]}")
+        raise fail(source, where, value, f"needs {count} point(s), has {arr.shape[0]}")
     tol = INSIDE_TOLERANCE_M
     outside = (arr[:, 0] < -tol) | (arr[:, 0] > wall_w + tol) | (arr[:, 1] < -tol) | (arr[:, 1] > wall_h + tol)
     if outside.any():
         bad = arr[np.argmax(outside)].tolist()
-        raise _fail(source, where, value, f"point {bad} lies outside the wall (0..{wall_w:g} x 0..{wall_h:g} m)")
+        raise fail(source, where, value, f"point {bad} lies outside the wall (0..{wall_w:g} x 0..{wall_h:g} m)")
     if min_n >= 2 and np.any(np.linalg.norm(np.diff(arr, axis=0), axis=1) < 1e-6):
-        raise _fail(source, where, value, "has repeated consecutive points")
+        raise fail(source, where, value, "has repeated consecutive points")
     return arr
 
 
 def _bool(source: str, where: str, value: Any) -> bool:
     if not isinstance(value, bool):
-        raise _fail(source, where, value, "must be true or false")
+        raise fail(source, where, value, "must be true or false")
     return value
 
 
 def _parse_object(source: str, index: int, raw: Any, wall_w: float, wall_h: float) -> WallObject:
     where = f"objects[{index}]"
     if not isinstance(raw, dict):
-        raise _fail(source, where, raw, "must be a mapping with kind, id, depth_m, ...")
+        raise fail(source, where, raw, "must be a mapping with kind, id, depth_m, ...")
     kind = raw.get("kind")
     if kind not in KINDS:
-        raise _fail(source, f"{where}.kind", kind, f"must be one of {', '.join(KINDS)}")
+        raise fail(source, f"{where}.kind", kind, f"must be one of {', '.join(KINDS)}")
     unknown = set(raw) - _COMMON_KEYS - _KIND_KEYS[kind]
     if unknown:
         key = sorted(unknown)[0]
-        raise _fail(source, f"{where}.{key}", raw[key], f"is not a field of a {kind} "
+        raise fail(source, f"{where}.{key}", raw[key], f"is not a field of a {kind} "
                     f"(allowed: {', '.join(sorted(_COMMON_KEYS - {'points_m', 'outline_m'} | _KIND_KEYS[kind]))}"
                     f", {'outline_m' if kind in AREA_KINDS else 'points_m'})")
     obj_id = raw.get("id")
-    if not isinstance(obj_id, (str, int)) or isinstance(obj_id, bool) or str(obj_id) == "":
-        raise _fail(source, f"{where}.id", obj_id, "must be a non-empty string")
+    if isinstance(obj_id, int) and not isinstance(obj_id, bool) and abs(obj_id) < 10**18:
+        obj_id = str(obj_id)
+    if not isinstance(obj_id, str) or not 0 < len(obj_id) <= 200:
+        raise fail(source, f"{where}.id", obj_id, "must be a non-empty string (at most 200 characters)")
     where = f"objects[{index}] (id {obj_id})"
     if "depth_m" not in raw:
-        raise _fail(source, f"{where}.depth_m", None, "is required (metres behind the surface)")
+        raise fail(source, f"{where}.depth_m", None, "is required (metres behind the surface)")
     depth = _number(source, f"{where}.depth_m", raw["depth_m"], 0.0, MAX_DEPTH_M)
     obj = WallObject(kind=kind, id=str(obj_id), depth_m=depth)
     if kind in AREA_KINDS:
         if "points_m" in raw:
-            raise _fail(source, f"{where}.points_m", raw["points_m"], f"a {kind} has an outline_m, not points_m")
+            raise fail(source, f"{where}.points_m", raw["points_m"], f"a {kind} has an outline_m, not points_m")
         if "outline_m" not in raw:
-            raise _fail(source, f"{where}.outline_m", None, "is required (polygon of [x, y] in metres)")
+            raise fail(source, f"{where}.outline_m", None, "is required (polygon of [x, y] in metres)")
         obj.outline_m = _points(source, f"{where}.outline_m", raw["outline_m"], wall_w, wall_h, 3)
         if abs(_polygon_area(obj.outline_m)) < 1e-6:
-            raise _fail(source, f"{where}.outline_m", raw["outline_m"], "encloses no area")
+            raise fail(source, f"{where}.outline_m", raw["outline_m"], "encloses no area")
     else:
         if "outline_m" in raw:
-            raise _fail(source, f"{where}.outline_m", raw["outline_m"], f"a {kind} has points_m, not outline_m")
+            raise fail(source, f"{where}.outline_m", raw["outline_m"], f"a {kind} has points_m, not outline_m")
         if "points_m" not in raw:
-            raise _fail(source, f"{where}.points_m", None, "is required (list of [x, y] in metres)")
+            raise fail(source, f"{where}.points_m", None, "is required (list of [x, y] in metres)")
         if kind in POINT_KINDS:
             obj.points_m = _points(source, f"{where}.points_m", raw["points_m"], wall_w, wall_h, 1, 1)
         else:
             obj.points_m = _points(source, f"{where}.points_m", raw["points_m"], wall_w, wall_h, 2)
     for key in _REQUIRED.get(kind, ()):
         if key not in raw:
-            raise _fail(source, f"{where}.{key}", None, f"is required for a {kind}")
+            raise fail(source, f"{where}.{key}", None, f"is required for a {kind}")
     values = {**_DEFAULTS[kind], **{k: v for k, v in raw.items() if k in _KIND_KEYS[kind]}}
     for key, value in values.items():
         field_name = f"{where}.{key}"
         if key == "material":
             allowed = _ALLOWED_MATERIALS[kind]
             if value not in allowed:
-                raise _fail(source, field_name, value, f"must be one of {', '.join(allowed)}")
+                raise fail(source, field_name, value, f"must be one of {', '.join(allowed)}")
             obj.material = value
         elif key == "diameter_m":
             obj.diameter_m = _number(source, field_name, value, 0.001, 0.2)
@@ -368,33 +357,35 @@ def wall_from_dict(raw: Any, source: str = "<wall>") -> Wall:
         raise InputError(f"{source}: the wall description must be a mapping with format, width_m, height_m, "
                          f"material and objects (got {type(raw).__name__})")
     if raw.get("format") != FORMAT:
-        raise _fail(source, "format", raw.get("format"), f"must be {FORMAT!r}")
+        raise fail(source, "format", raw.get("format"), f"must be {FORMAT!r}")
     allowed = {"format", "name", "width_m", "height_m", "material", "objects", "room", "openings", "sockets"}
     unknown = set(raw) - allowed
     if unknown:
         key = sorted(unknown)[0]
-        raise _fail(source, key, raw[key], f"is not a wall field (allowed: {', '.join(sorted(allowed))})")
+        raise fail(source, key, raw[key], f"is not a wall field (allowed: {', '.join(sorted(allowed))})")
     for key in ("width_m", "height_m"):
         if key not in raw:
-            raise _fail(source, key, None, "is required (metres)")
+            raise fail(source, key, None, "is required (metres)")
     width = _number(source, "width_m", raw["width_m"], 0.05, 50.0)
     height = _number(source, "height_m", raw["height_m"], 0.05, 10.0)
     material = raw.get("material", "brick")
     if material not in WALL_MATERIALS:
-        raise _fail(source, "material", material, f"must be one of {', '.join(WALL_MATERIALS)}")
+        raise fail(source, "material", material, f"must be one of {', '.join(WALL_MATERIALS)}")
     name = raw.get("name", "")
     if not isinstance(name, str):
-        raise _fail(source, "name", name, "must be text")
+        raise fail(source, "name", name, "must be text")
     objects_raw = raw.get("objects", [])
     if objects_raw is None:
         objects_raw = []
     if not isinstance(objects_raw, list):
-        raise _fail(source, "objects", objects_raw, "must be a list")
+        raise fail(source, "objects", objects_raw, "must be a list")
+    if len(objects_raw) > MAX_OBJECTS:
+        raise fail(source, "objects", objects_raw, f"has {len(objects_raw):,} objects; at most {MAX_OBJECTS:,}")
     objects = [_parse_object(source, i, o, width, height) for i, o in enumerate(objects_raw)]
     seen: set[str] = set()
     for i, obj in enumerate(objects):
         if obj.id in seen:
-            raise _fail(source, f"objects[{i}].id", obj.id, "is used twice; ids must be unique")
+            raise fail(source, f"objects[{i}].id", obj.id, "is used twice; ids must be unique")
         seen.add(obj.id)
     return Wall(width_m=width, height_m=height, material=material, name=name, objects=objects, source=source,
                 room=_parse_room(source, raw.get("room"), height), openings=_parse_openings(
@@ -406,7 +397,7 @@ def _parse_room(source: str, raw: Any, wall_h: float) -> Room | None:
     if raw is None:
         return None
     if not isinstance(raw, dict) or set(raw) != {"floor_y_m", "ceiling_y_m"}:
-        raise _fail(source, "room", raw, "must be a mapping with floor_y_m and ceiling_y_m (metres, wall y)")
+        raise fail(source, "room", raw, "must be a mapping with floor_y_m and ceiling_y_m (metres, wall y)")
     tol = INSIDE_TOLERANCE_M
     floor = _number(source, "room.floor_y_m", raw["floor_y_m"], -10.0, tol)  # the wall stands on or above it
     ceiling = _number(source, "room.ceiling_y_m", raw["ceiling_y_m"], wall_h - tol, 20.0)
@@ -417,24 +408,24 @@ def _parse_openings(source: str, raw: Any, wall_w: float, wall_h: float) -> list
     if raw is None:
         return []
     if not isinstance(raw, list):
-        raise _fail(source, "openings", raw, "must be a list of {kind: door|window, outline_m: [[x, y], ...]}")
+        raise fail(source, "openings", raw, "must be a list of {kind: door|window, outline_m: [[x, y], ...]}")
     openings = []
     for i, item in enumerate(raw):
         where = f"openings[{i}]"
         if not isinstance(item, dict):
-            raise _fail(source, where, item, "must be a mapping with kind (door | window) and outline_m")
+            raise fail(source, where, item, "must be a mapping with kind (door | window) and outline_m")
         unknown = set(item) - {"kind", "outline_m"}
         if unknown:
             key = sorted(unknown)[0]
-            raise _fail(source, f"{where}.{key}", item[key], "is not a field of an opening (allowed: kind, "
+            raise fail(source, f"{where}.{key}", item[key], "is not a field of an opening (allowed: kind, "
                         "outline_m)")
         if item.get("kind") not in OPENING_KINDS:
-            raise _fail(source, f"{where}.kind", item.get("kind"), f"must be one of {', '.join(OPENING_KINDS)}")
+            raise fail(source, f"{where}.kind", item.get("kind"), f"must be one of {', '.join(OPENING_KINDS)}")
         if "outline_m" not in item:
-            raise _fail(source, f"{where}.outline_m", None, "is required (polygon of [x, y] in metres)")
+            raise fail(source, f"{where}.outline_m", None, "is required (polygon of [x, y] in metres)")
         outline = _points(source, f"{where}.outline_m", item["outline_m"], wall_w, wall_h, 3)
         if abs(_polygon_area(outline)) < 1e-6:
-            raise _fail(source, f"{where}.outline_m", item["outline_m"], "encloses no area")
+            raise fail(source, f"{where}.outline_m", item["outline_m"], "encloses no area")
         openings.append(Opening(item["kind"], outline))
     return openings
 
@@ -443,33 +434,20 @@ def _parse_sockets(source: str, raw: Any, wall_w: float, wall_h: float) -> np.nd
     if raw is None or raw == []:
         return np.zeros((0, 2))
     if not isinstance(raw, list):
-        raise _fail(source, "sockets", raw, "must be a list of [x, y] socket centres in metres")
+        raise fail(source, "sockets", raw, "must be a list of [x, y] socket centres in metres")
     centres = []
     for i, item in enumerate(raw):
         if not (isinstance(item, (list, tuple)) and len(item) == 2):
-            raise _fail(source, f"sockets[{i}]", item, "must be one [x, y] point in metres")
+            raise fail(source, f"sockets[{i}]", item, "must be one [x, y] point in metres")
         centres.append(_points(source, f"sockets[{i}]", [item], wall_w, wall_h, 1, 1)[0])
     return np.array(centres, dtype=np.float64)
 
 
 def load_wall(path: str | Path) -> Wall:
     """Read and validate a wall description file (YAML or JSON)."""
-    path = Path(path)
+    raw = load_document(path, "wall file", "give the path of a wall description (.yaml or .json); shipped walls "
+                        "are in scanner/walls/")
     source = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{source}: wall file not found",
-                         "give the path of a wall description (.yaml or .json); shipped walls are in "
-                         "scanner/walls/") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise InputError(f"{source}: cannot read the wall file ({err})") from None
-    try:
-        raw = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
-    except (yaml.YAMLError, json.JSONDecodeError) as err:
-        detail = str(err).replace("\n", " ")
-        raise InputError(f"{source}: not valid {'JSON' if path.suffix.lower() == '.json' else 'YAML'}: "
-                         f"{detail}") from None
     return wall_from_dict(raw, source)
 
 

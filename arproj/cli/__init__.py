@@ -74,8 +74,24 @@ except KeyboardInterrupt:
     sys.exit(EXIT_INTERRUPTED)
 
 
+_built: dict[tuple[int, int], typer.core.TyperGroup] = {}
+
+
+def _command() -> typer.core.TyperGroup:
+    """The click command typer builds from `app`, built once (typer rebuilds it on every `app()`, 0.2 s: what
+    in-process callers of main(), such as the bad-input suite's thousand runs, would pay each time); rebuilt
+    when commands are added."""
+    key = (len(app.registered_commands), len(app.registered_groups))
+    if key not in _built:
+        _built.clear()
+        _built[key] = typer.main.get_group(app)
+    return _built[key]
+
+
 def main() -> None:
     """Console-script entry point."""
+    from rich.markup import escape
+
     from arproj.console import err_console
     from geometry import provenance
 
@@ -85,9 +101,10 @@ def main() -> None:
     if handled:  # not when started with SIGINT ignored (or from a thread, or under another handler)
         signal.signal(signal.SIGINT, _interrupt_once)
     try:
-        app()  # standalone: usage errors print a hint; typer turns KeyboardInterrupt into exit status 130
+        _command()()  # standalone: usage errors print a hint; KeyboardInterrupt becomes exit status 130
     except InputError as err:
-        err_console.print(f"[bold red]arproj: error:[/] {err}", highlight=False, soft_wrap=True)
+        # escaped: a value quoted from a file ("[/x]") is text, not markup
+        err_console.print(f"[bold red]arproj: error:[/] {escape(str(err))}", highlight=False, soft_wrap=True)
         sys.exit(2)
     except Interrupted as err:  # a command that says what it kept
         err_console.print(f"\n[bold red]arproj: interrupted:[/] {err}", highlight=False, soft_wrap=True)

@@ -90,6 +90,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             raise InputError("no point to check", "give --at X,Y (wall metres) or --points FILE.csv")
         coverage = Coverage.load(map_dir / FILE_NAME)
         objects = mapfile.read_objects(map_dir / mapfile.FILE_NAME)
+        mapfile.check_objects_within(objects, coverage.wall_bounds, map_dir / mapfile.FILE_NAME)
         verdicts = drill.check_points(queries, objects, coverage, coverage.wall_bounds,
                                       drill_radius_m=radius_mm / 1000.0)
         if as_json:

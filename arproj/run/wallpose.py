@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from geometry.errors import InputError
+from geometry.inputs import read_image
 
 # The simulated room lights every surface alike; in a real room the walls meeting at a corner differ in how they
 # are lit. The --sim site gives wall 0's neighbours another reflectance so that its corners show (wall 0 as is).
@@ -30,12 +31,7 @@ def parse_head_angles(text: str) -> np.ndarray:
 
 
 def _read_gray(path: Path, option: str) -> np.ndarray:
-    import cv2
-
-    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    if image is None:
-        raise InputError(f"{option} {path}: not a readable image", "pass a PNG or JPEG photo of the pattern")
-    return image
+    return read_image(path, f"{option} image", hint="pass a PNG or JPEG photo of the pattern")
 
 
 def draw_result(image: np.ndarray, corners: np.ndarray, used: np.ndarray, lines: list[str], path: Path,

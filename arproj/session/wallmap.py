@@ -23,11 +23,15 @@ from numpy.typing import NDArray
 
 from arproj.session import tolerances as tol
 from geometry.errors import InputError
+from geometry.inputs import check_file
 from mapping.evidence import FILE_NAME as COVERAGE_FILE
 from mapping.evidence import Coverage
 from mapping.grid import GridInfo
 from mapping.mapfile import FILE_NAME as OBJECTS_FILE
-from mapping.mapfile import MAP_CLASSES, OUTLINE_CLASSES, MappedObject, read_objects
+from mapping.mapfile import MAP_CLASSES, OUTLINE_CLASSES, MappedObject, check_objects_within, read_objects
+
+MAX_GLB_BYTES = 1 << 30  # a wall's textured mesh is tens of MB
+MAX_WALL_M = 100.0       # a wall map's vertices, metres from the wall frame's origin
 
 __all__ = ["MAP_CLASSES", "OUTLINE_CLASSES", "MappedObject", "WallMap", "load_wall_map", "wall_map_from_wall",
            "wall_map_from_wall_file"]
@@ -58,6 +62,7 @@ def load_wall_map(glb_path: str | Path, objects_path: str | Path | None = None) 
     glb_path = Path(glb_path)
     if not glb_path.exists():
         raise InputError(f"{glb_path}: no such map file", "pass the wall.glb written by `arproj map … --out DIR`")
+    check_file(glb_path, "map file (GLB)", MAX_GLB_BYTES, "pass the wall.glb written by `arproj map … --out DIR`")
     try:
         loaded = trimesh.load(glb_path, file_type="glb" if glb_path.suffix.lower() != ".gltf" else None,
                               force=None)
@@ -69,6 +74,7 @@ def load_wall_map(glb_path: str | Path, objects_path: str | Path | None = None) 
     objects_path = Path(objects_path) if objects_path is not None else glb_path.with_name(OBJECTS_FILE)
     objects = read_objects(objects_path) if objects_path.exists() else []
     coverage = Coverage.load(glb_path.with_name(COVERAGE_FILE))
+    check_objects_within(objects, coverage.wall_bounds, objects_path)
     return WallMap(mesh, objects, texture, uv_from_xy, coverage, source=str(glb_path))
 
 
@@ -91,6 +97,9 @@ def _single_mesh(loaded: object, path: Path) -> trimesh.Trimesh:
         raise InputError(f"{path}: the GLB holds a {type(loaded).__name__}, not a triangle mesh")
     if len(mesh.faces) == 0 or not np.all(np.isfinite(mesh.vertices)):
         raise InputError(f"{path}: the mesh is empty or has non-finite vertices")
+    if np.abs(mesh.vertices).max() > MAX_WALL_M:
+        raise InputError(f"{path}: the mesh reaches {np.abs(mesh.vertices).max():.3g} m from the wall's origin; a "
+                         f"wall map lies within {MAX_WALL_M:g} m", "re-export it with `arproj map`")
     return mesh
 
 

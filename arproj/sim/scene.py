@@ -17,6 +17,7 @@ from typing import Any
 import yaml
 
 from geometry.errors import InputError
+from geometry.inputs import fail, integer, is_number, load_document, number
 
 Scene = dict[str, Any]
 
@@ -59,6 +60,19 @@ _RULES: dict[str, str] = {
     "rangecam.grazing_limit_deg": _POSITIVE, "rangecam.dropout_fraction": _FRACTION,
 }
 _BELOW_180 = {"cameras.hfov_deg", "rangecam.hfov_deg", "rangecam.grazing_limit_deg"}
+# Physical ranges beyond the rules above: image sizes the renderer can hold (a 100,000² beamer is 28 GiB),
+# texture and beam steps that stay countable, a room and a robot of this world.
+_LIMITS: dict[str, tuple[float, float]] = {
+    "projector.width": (16, 4096), "projector.height": (16, 4096), "cameras.width": (16, 8192),
+    "cameras.height": (16, 8192), "rangecam.width": (16, 2048), "rangecam.height": (16, 2048),
+    "room.height_m": (0.5, 20.0), "room.texel_m": (0.001, 0.1), "laser.resolution_deg": (0.01, 10.0),
+    "laser.fov_deg": (1.0, 360.0), "laser.range_max_m": (0.1, 100.0), "robot.distance_m": (0.1, 50.0),
+    "robot.aim_height_m": (0.0, 20.0), "robot.along_m": (0.0, 100.0), "robot.footprint_radius_m": (0.01, 5.0),
+    "rangecam.range_max_m": (0.01, 100.0), "cameras.baseline_m": (0.001, 10.0),
+    "cameras.exposure_s": (1e-6, 10.0), "projector.throw_ratio": (0.05, 20.0),
+}
+MAX_ABS = 1e6  # any number of a scene; the ranges above are tighter where a value sizes memory or time
+MAX_ROOM_M = 50.0  # room corners, metres from the origin
 
 
 @cache
@@ -94,13 +108,7 @@ def load_scene(scene: str | Path | dict | None = None, **overrides: Any) -> Scen
 
 
 def _read_yaml(path: Path) -> dict:
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such scene file", "pass a YAML scene (see arproj/sim/scenes/default.yaml)"
-                         ) from None
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
-        raise InputError(f"{path}: not valid YAML ({str(err).splitlines()[0]})") from None
+    doc = load_document(path, "scene file", "pass a YAML scene (see arproj/sim/scenes/default.yaml)")
     if doc is None:
         return {}
     if not isinstance(doc, dict):
@@ -136,17 +144,13 @@ def _typed(default: Any, value: Any, key: str, source: str) -> Any:
     if key == "robot.head_deg":
         return _number_list(value, key, source, 3)
     if (default is None and key in _NULLABLE) or isinstance(default, float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise InputError(f"{source}: {key} must be a number, got {value!r}")
-        return float(value)
+        return number(source, key, value, -MAX_ABS, MAX_ABS)
     if isinstance(default, bool):
         if not isinstance(value, bool):
             raise InputError(f"{source}: {key} must be true or false, got {value!r}")
         return value
     if isinstance(default, int):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise InputError(f"{source}: {key} must be an integer, got {value!r}")
-        return value
+        return integer(source, key, value, -int(MAX_ABS), int(MAX_ABS))
     if isinstance(default, str):
         if not isinstance(value, str):
             raise InputError(f"{source}: {key} must be a string, got {value!r}")
@@ -160,11 +164,10 @@ def _typed(default: Any, value: Any, key: str, source: str) -> Any:
 
 def _number_list(value: Any, key: str, source: str, length: int | None = None) -> list:
     flat = value if isinstance(value, list) else [value]
-    ok = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in flat)
-    if not ok or (length is not None and len(flat) != length):
+    if not all(is_number(v) for v in flat) or (length is not None and len(flat) != length) or len(flat) > 64:
         shape = f"{length} numbers" if length is not None else "numbers"
-        raise InputError(f"{source}: {key} must be a list of {shape}, got {value!r}")
-    return [float(v) for v in flat]
+        raise fail(source, key, value, f"must be a list of {shape}")
+    return [number(source, f"{key}[{i}]", v, -MAX_ABS, MAX_ABS) for i, v in enumerate(flat)]
 
 
 def _check_rule(rule_key: str, key: str, value: Any, source: str) -> None:
@@ -182,19 +185,28 @@ def _validate(scene: Scene, source: str) -> None:
     for key in _RULES:
         section, name = key.split(".")
         _check_rule(key, key, scene[section][name], source)
+    for key, (lo, hi) in _LIMITS.items():
+        section, name = key.split(".")
+        if scene[section][name] is not None:
+            number(source, key, scene[section][name], lo, hi)
 
     room = scene["room"]
     corners = room["corners_m"]
     if len(corners) < 3:
         raise InputError(f"{source}: room.corners_m needs at least 3 corners, got {corners!r}")
+    if len(corners) > 64:
+        raise fail(source, "room.corners_m", corners, "a room has at most 64 corners")
     room["corners_m"] = [_number_list(c, f"room.corners_m[{i}]", source, 2) for i, c in enumerate(corners)]
+    far = [c for c in room["corners_m"] if max(abs(c[0]), abs(c[1])) > MAX_ROOM_M]
+    if far:
+        raise fail(source, "room.corners_m", far[0], f"a corner more than {MAX_ROOM_M:g} m from the origin")
     if room["wall_texture"] not in TEXTURES:
         raise InputError(f"{source}: room.wall_texture = {room['wall_texture']!r} is not one of {TEXTURES}")
     walls = {}
     for index, override in room["walls"].items():
         try:
             i = int(index)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise InputError(f"{source}: room.walls key {index!r} must be a wall index (0..)") from None
         if not 0 <= i < len(corners):
             raise InputError(f"{source}: room.walls has wall {i}, but the room has {len(corners)} walls "
@@ -257,6 +269,8 @@ def _validate(scene: Scene, source: str) -> None:
                 raise InputError(f"{source}: {key} has {len(right[k])} coefficients; use 4, 5 or 8")
         elif f"cameras.{k}" in _RULES:
             _check_rule(f"cameras.{k}", key, right[k], source)
+        if f"cameras.{k}" in _LIMITS:
+            number(source, key, right[k], *_LIMITS[f"cameras.{k}"])
     cams["right"] = right
     if cams["msaa_samples"] not in (0, 2, 4, 8):
         raise InputError(f"{source}: cameras.msaa_samples = {cams['msaa_samples']!r} must be 0, 2, 4 or 8")

@@ -75,7 +75,7 @@ def test_unparsable_and_missing_files(tmp_path):
     bad.write_text("width_m: [1,\n")
     with pytest.raises(InputError, match="not valid YAML"):
         load_wall(bad)
-    with pytest.raises(InputError, match="not found"):
+    with pytest.raises(InputError, match="no such wall file"):
         load_wall(tmp_path / "nope.yaml")
 
 
