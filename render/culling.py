@@ -32,29 +32,16 @@ class ChunkBounds:
         hi = np.maximum.reduceat(corners.max(axis=1), starts, axis=0)
         return cls(lo, hi, len(faces))
 
-    def _clip_corners(self, clip_from_world: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-        """Each chunk's box corners in clip space (n, 8, 4) and whether the box lies wholly outside one plane of
-        the clip volume (conservative: a chunk that may show is never outside)."""
+    def visible_ranges(self, clip_from_world: NDArray[np.float64]) -> list[tuple[int, int]]:
+        """(first_face, n_faces) runs to draw: every chunk not wholly outside one plane of the clip volume
+        (conservative: a chunk that may show is always drawn)."""
         lo, hi = self.lo, self.hi
         corners = np.stack([np.column_stack([(hi if i & 1 else lo)[:, 0], (hi if i & 2 else lo)[:, 1],
                                              (hi if i & 4 else lo)[:, 2], np.ones(len(lo))]) for i in range(8)],
                            axis=1)  # (n, 8, 4)
         clip = corners @ np.asarray(clip_from_world, dtype=np.float64).T
         xyz, w = clip[..., :3], clip[..., 3:]
-        return clip, np.any((xyz > w).all(axis=1) | (xyz < -w).all(axis=1), axis=1)
-
-    def nearest_depth(self, clip_from_world: NDArray[np.float64]) -> float | None:
-        """The least depth along the optical axis (clip w of a pinhole projection) of any box corner of the
-        chunks that may show; None when none may. A lower bound of the depth of every visible triangle."""
-        clip, outside = self._clip_corners(clip_from_world)
-        if outside.all():
-            return None
-        return float(clip[~outside][..., 3].min())
-
-    def visible_ranges(self, clip_from_world: NDArray[np.float64]) -> list[tuple[int, int]]:
-        """(first_face, n_faces) runs to draw: every chunk not wholly outside one plane of the clip volume
-        (conservative: a chunk that may show is always drawn)."""
-        _, outside = self._clip_corners(clip_from_world)
+        outside = np.any((xyz > w).all(axis=1) | (xyz < -w).all(axis=1), axis=1)
         visible = np.flatnonzero(~outside)
         if len(visible) == 0:
             return []

@@ -48,6 +48,9 @@ _NEAR_FAR_RATIO = 1e-4
 _TEXTURE_FILTER = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
 # Simplifying for a view, assume the head may come this much closer before the mesh must be simplified again.
 NEAR_MARGIN = 0.85
+# The nearest depth a view sees is taken over the vertices that project within the image widened by this
+# fraction on each side: a triangle reaching into the image from outside has a corner there.
+_NEAR_IMAGE_MARGIN = 0.25
 
 
 @dataclass
@@ -67,8 +70,22 @@ class _Geometry:
     ibo: moderngl.Buffer
     vao: moderngl.VertexArray
     chunks: ChunkBounds
-    n_faces: int
+    positions: NDArray[np.float32]  # (n, 3), for the nearest depth a view sees
     tolerance_m: float  # its measured deviation is within this (0: the full mesh)
+
+    @property
+    def n_faces(self) -> int:
+        return self.chunks.n_faces
+
+    def nearest_depth(self, clip_from_world: NDArray[np.float64]) -> float | None:
+        """The least depth (metres along the optical axis) of the vertices in (or near) the view; None if
+        none is in front of the camera there."""
+        clip = self.positions @ clip_from_world[:, :3].T.astype(np.float32) + clip_from_world[:, 3].astype(
+            np.float32)
+        w = clip[:, 3]
+        reach = w * (1.0 + 2.0 * _NEAR_IMAGE_MARGIN)
+        near = (w > 0) & (np.abs(clip[:, 0]) <= reach) & (np.abs(clip[:, 1]) <= reach)
+        return float(w[near].min()) if near.any() else None
 
     def release(self) -> None:
         self.vao.release()
@@ -186,7 +203,7 @@ class MeshRenderer:
         vbo = self.ctx.buffer(np.ascontiguousarray(np.hstack([positions, attribute]), dtype=np.float32))
         ibo = self.ctx.buffer(np.ascontiguousarray(order_faces))
         vao = self.ctx.vertex_array(program, [(vbo, *layout)], index_buffer=ibo, index_element_size=4)
-        return _Geometry(vbo, ibo, vao, ChunkBounds.of(positions, order_faces), len(order_faces), tol_m)
+        return _Geometry(vbo, ibo, vao, ChunkBounds.of(positions, order_faces), positions, tol_m)
 
     def _simplify(self, item: _DrawItem, tol_m: float) -> None:
         """Replace the item's triangles by its mesh simplified within tol_m (the texture stays)."""
@@ -202,7 +219,7 @@ class MeshRenderer:
         bound_px = self.max_error_px
         if item.decimation is None or bound_px is None:
             return
-        nearest = item.geometry.chunks.nearest_depth(clip)
+        nearest = item.geometry.nearest_depth(clip)
         if nearest is None:
             return  # nothing of it in view
         nearest = max(nearest, near)
