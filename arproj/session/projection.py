@@ -18,6 +18,7 @@ from arproj.session import tolerances as tol
 from arproj.session.wallmap import WallMap
 from geometry.intrinsics import Intrinsics
 from render import MeshRenderer
+from render.simplify import PROJECTED_ERROR_PX
 
 SIGMA_QUANTUM_M = 0.0005  # bands are redrawn when the registration σ changes by this much, not every frame
 CHECK_MARK_RADIUS_M = 0.008
@@ -53,7 +54,7 @@ class MapProjector:
     def __init__(self, wall_map: WallMap, projector: Intrinsics, ctx: object | None = None) -> None:
         self.wall_map = wall_map
         self.projector = projector
-        self._renderer = MeshRenderer(ctx=ctx)  # type: ignore[arg-type]
+        self._renderer = MeshRenderer(ctx=ctx, max_error_px=PROJECTED_ERROR_PX)  # type: ignore[arg-type]
         self._key: tuple | None = None
         self.raster: overlays.WallRaster | None = None
 
