@@ -118,9 +118,16 @@ class Decimation:
 
     def __init__(self, vertices: NDArray[np.floating], faces: NDArray[np.integer], uv: NDArray[np.floating]
                  ) -> None:
-        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
-        self.faces = np.ascontiguousarray(faces, dtype=np.int32)
-        self.uv = np.asarray(uv, dtype=np.float64)
+        # Weld vertices equal in position and UV: a mesh stored one triangle at a time (every edge a border)
+        # would otherwise keep every vertex. Vertices that differ in UV (a seam) stay apart.
+        vertices, uv = np.asarray(vertices, dtype=np.float64), np.asarray(uv, dtype=np.float64)
+        _, first, inverse = np.unique(np.hstack([vertices, uv]), axis=0, return_index=True, return_inverse=True)
+        f = inverse.ravel()[np.asarray(faces, dtype=np.int64)]
+        f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+        self._original = first  # welded vertex → a vertex of the mesh given
+        self.vertices = np.ascontiguousarray(vertices[first])
+        self.faces = np.ascontiguousarray(f, dtype=np.int32)
+        self.uv = uv[first]
         used = np.zeros(len(self.vertices), dtype=bool)
         used[self.faces.ravel()] = True
         self._used = np.flatnonzero(used)
@@ -146,7 +153,7 @@ class Decimation:
             kept = self._used
             index = np.full(len(v), -1, dtype=np.int64)
             index[kept] = np.arange(len(kept))
-            return Simplified(v[kept], self.uv[kept], index[self.faces], kept, 0.0, 0.0)
+            return Simplified(v[kept], self.uv[kept], index[self.faces], self._original[kept], 0.0, 0.0)
         c = self.collapses[:k]
         # Positions: fast_simplification's own replay of these collapses (the point each merge moved to).
         _replay.load_int32(len(v), len(self.faces), len(c), v, self.faces, np.ascontiguousarray(c))
@@ -180,7 +187,7 @@ class Decimation:
         if len(moved):
             uv[moved], off_surface[moved] = self._surface_uv(pos[moved])
         deviation = max(float(off_surface.max()), self._texture_deviation(pos, uv, faces))
-        return Simplified(pos, uv, faces, kept, deviation, 0.0)
+        return Simplified(pos, uv, faces, self._original[kept], deviation, 0.0)
 
     def _surface_uv(self, points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """UV of the full surface at (or nearest to) each point, and the distance to it: among the triangles

@@ -88,7 +88,8 @@ def test_the_bound_is_what_a_point_moved_that_far_moves_in_the_image() -> None:
 def test_simplified_mesh_keeps_borders_and_seams_and_stays_within_the_bound() -> None:
     mesh = sample_wall_mesh(grid=81, texture_px=1024)
     v, f, uv = np.asarray(mesh.vertices), np.asarray(mesh.faces), np.asarray(mesh.visual.uv)
-    # A UV seam down the middle: the right half's faces get their own copies of the seam's vertices.
+    # A UV seam down the middle: the right half's faces get their own copies of the seam's vertices, with UVs
+    # of their own (the right half's texture sits 0.01 further right in the image)
     seam = np.flatnonzero(np.isclose(v[:, 0], v[40, 0]))
     right = v[f].mean(axis=1)[:, 0] > v[40, 0]
     copies = np.arange(len(v), len(v) + len(seam))
@@ -97,6 +98,7 @@ def test_simplified_mesh_keeps_borders_and_seams_and_stays_within_the_bound() ->
     f = f.copy()
     f[right] = remap[f[right]]
     v, uv = np.vstack([v, v[seam]]), np.vstack([uv, uv[seam]])
+    uv[np.unique(f[right])] += [0.01, 0.0]
     tol = tolerance_m(INTR, NEAREST_M)
     simplified = decimation_of(v, f, uv).within(tol)
     assert len(simplified.faces) < 0.6 * len(f)  # a small mesh: its border and seam strips are much of it
@@ -164,3 +166,14 @@ def test_first_view_chooses_the_simplification_and_a_mesh_without_uvs_is_drawn_i
         r.set_mesh(coloured)
         r.render(INTR, T)
         assert r.triangles == len(wall.faces)
+
+
+def test_a_mesh_stored_one_triangle_at_a_time_is_welded_and_simplified() -> None:
+    mesh = sample_wall_mesh(grid=81, texture_px=1024)
+    v, f, uv = np.asarray(mesh.vertices), np.asarray(mesh.faces), np.asarray(mesh.visual.uv)
+    loose_v, loose_uv, loose_f = v[f].reshape(-1, 3), uv[f].reshape(-1, 2), np.arange(3 * len(f)).reshape(-1, 3)
+    tol = tolerance_m(INTR, NEAREST_M)
+    welded = decimation_of(loose_v, loose_f, loose_uv).within(tol)
+    indexed = decimation_of(v, f, uv).within(tol)
+    assert len(welded.faces) == len(indexed.faces) < 0.6 * len(f)
+    np.testing.assert_array_equal(loose_v[welded.source], v[indexed.source])  # the same vertices, found again
