@@ -49,8 +49,10 @@ _TEXTURE_FILTER = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
 # Simplifying for a view, assume the head may come this much closer before the mesh must be simplified again.
 NEAR_MARGIN = 0.85
 # The nearest depth a view sees is taken over the vertices that project within the image widened by this
-# fraction on each side: a triangle reaching into the image from outside has a corner there.
-_NEAR_IMAGE_MARGIN = 0.25
+# fraction on each side, where a triangle reaching into the image has a corner (the simplified wall's triangles
+# span a few centimetres, 30-60 px at 1.7 m); one longer still could reach nearer by a few per cent of the
+# depth, which NEAR_MARGIN covers.
+_NEAR_IMAGE_MARGIN = 0.05
 
 
 @dataclass

@@ -120,14 +120,14 @@ class Decimation:
                  ) -> None:
         # Weld vertices equal in position and UV: a mesh stored one triangle at a time (every edge a border)
         # would otherwise keep every vertex. Vertices that differ in UV (a seam) stay apart.
-        vertices, uv = np.asarray(vertices, dtype=np.float64), np.asarray(uv, dtype=np.float64)
-        _, first, inverse = np.unique(np.hstack([vertices, uv]), axis=0, return_index=True, return_inverse=True)
+        v_in, uv_in = np.asarray(vertices, dtype=np.float64), np.asarray(uv, dtype=np.float64)
+        _, first, inverse = np.unique(np.hstack([v_in, uv_in]), axis=0, return_index=True, return_inverse=True)
         f = inverse.ravel()[np.asarray(faces, dtype=np.int64)]
         f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
         self._original = first  # welded vertex → a vertex of the mesh given
-        self.vertices = np.ascontiguousarray(vertices[first])
+        self.vertices: NDArray[np.float64] = np.ascontiguousarray(v_in[first])
         self.faces = np.ascontiguousarray(f, dtype=np.int32)
-        self.uv = uv[first]
+        self.uv: NDArray[np.float64] = uv_in[first]
         used = np.zeros(len(self.vertices), dtype=bool)
         used[self.faces.ravel()] = True
         self._used = np.flatnonzero(used)
