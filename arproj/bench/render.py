@@ -153,11 +153,13 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
                    f"{w}×{h}: {t.simplify_s:.1f} s" for (w, h), t in r.times.items()) + ".",
                "Picture: arproj simplified against arproj on the full mesh, same view: largest and 99th-percentile "
                "shift of a texture edge (inf: an edge not found within a pixel), largest depth difference, largest "
-               "grey difference and the share of pixels more than 16 grey levels apart. This texture is "
-               "minified (mip levels): a level chosen differently at a few edge pixels changes their grey, not "
-               "the edge's place; tests/render/test_simplify.py proves the picture on a magnified texture.",
-               "pose → frame: a new T_wall_from_projector each frame (the head moving 0.05° and 2 mm), to the read "
-               "-back colour frame; median (p95: " + ", ".join(
+               "grey difference and the share of pixels more than 16 grey levels apart. Here the 4096² texture "
+               "is minified (several texels a pixel): a UV change far below a pixel can pick another mip level "
+               "or texel at a few edge pixels, which the largest shift and grey difference show; the 99th "
+               "percentile is the surface's. tests/render/test_simplify.py proves the picture on a magnified "
+               "texture, within 0.1 px at every edge.",
+               "pose → frame: a new T_wall_from_projector each frame (the head moving 0.05° and 2 mm), to the "
+               "read-back colour frame; median (p95: " + ", ".join(
                    f"{w}×{h}: {t.latency_p95_ms:.1f} ms" for (w, h), t in r.times.items()) + ").",
                "arproj full mesh / full untextured: the same renderer without simplification, textured and with "
                "vertex colours: what the triangles alone cost on this renderer.",
