@@ -11,6 +11,11 @@ owned by the renderer and released by release() / on leaving the `with` block.
 
 Meshes are reordered at upload for the vertex cache (vertex_order.py): the same triangles, drawn with
 about 40 % less vertex work on llvmpipe; and chunks of triangles outside the view are not drawn (culling.py).
+
+With max_error_px (e.g. simplify.PROJECTED_ERROR_PX, a tenth of a pixel), a textured mesh is drawn simplified
+to what the view can resolve (simplify.py): at upload for the intrinsics and nearest depth given to set_mesh,
+else for the first view drawn; and again whenever a view comes closer than the simplification allows, so that
+no frame's picture moves by more than max_error_px from the full mesh's. The full mesh stays on the CPU for that.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from render.culling import ChunkBounds
 from render.distortion import distortion_map
 from render.gl import create_context, release_framebuffer
 from render.projection import linear_depth, projection_matrix, view_matrix
+from render.simplify import Decimation, decimation_of, ladder_floor, tolerance_m
 from render.vertex_order import cache_friendly
 
 # Flip NDC y so the framebuffer's first row is the image's top row: read-back needs no flip or copy.
@@ -40,6 +46,13 @@ _NEAR_FAR_RATIO = 1e-4
 # Bilinear within the nearest mip level: on llvmpipe, trilinear costs ~20 % and anisotropic filtering 2-3x the
 # frame time of a textured wall, for differences a projected picture does not show.
 _TEXTURE_FILTER = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
+# Simplifying for a view, assume the head may come this much closer before the mesh must be simplified again.
+NEAR_MARGIN = 0.85
+# The nearest depth a view sees is taken over the vertices that project within the image widened by this
+# fraction on each side, where a triangle reaching into the image has a corner (the simplified wall's triangles
+# span a few centimetres, 30-60 px at 1.7 m); one longer still could reach nearer by a few per cent of the
+# depth, which NEAR_MARGIN covers.
+_NEAR_IMAGE_MARGIN = 0.05
 
 
 @dataclass
@@ -52,12 +65,42 @@ class RenderResult:
 
 
 @dataclass
-class _DrawItem:
+class _Geometry:
+    """The GPU buffers of one version (full or simplified) of a mesh's triangles."""
+
     vbo: moderngl.Buffer
     ibo: moderngl.Buffer
     vao: moderngl.VertexArray
-    texture: moderngl.Texture | None
     chunks: ChunkBounds
+    positions: NDArray[np.float32]  # (n, 3), for the nearest depth a view sees
+    tolerance_m: float  # its measured deviation is within this (0: the full mesh)
+
+    @property
+    def n_faces(self) -> int:
+        return self.chunks.n_faces
+
+    def nearest_depth(self, clip_from_world: NDArray[np.float64]) -> float | None:
+        """The least depth (metres along the optical axis) of the vertices in (or near) the view; None if
+        none is in front of the camera there."""
+        clip = self.positions @ clip_from_world[:, :3].T.astype(np.float32) + clip_from_world[:, 3].astype(
+            np.float32)
+        w = clip[:, 3]
+        reach = w * (1.0 + 2.0 * _NEAR_IMAGE_MARGIN)
+        near = (w > 0) & (np.abs(clip[:, 0]) <= reach) & (np.abs(clip[:, 1]) <= reach)
+        return float(w[near].min()) if near.any() else None
+
+    def release(self) -> None:
+        self.vao.release()
+        self.vbo.release()
+        self.ibo.release()
+
+
+@dataclass
+class _DrawItem:
+    geometry: _Geometry
+    texture: moderngl.Texture | None
+    decimation: Decimation | None   # None: drawn in full (no simplification asked, or no UVs)
+    pending: bool                   # uploaded in full, to be simplified for the first view
 
 
 @dataclass
@@ -70,7 +113,12 @@ class _Target:
 class MeshRenderer:
     """Draws one mesh (or a scene of meshes) into offscreen framebuffers of any size."""
 
-    def __init__(self, ctx: moderngl.Context | None = None, background: ArrayLike = (0, 0, 0, 0)) -> None:
+    def __init__(self, ctx: moderngl.Context | None = None, background: ArrayLike = (0, 0, 0, 0),
+                 max_error_px: float | None = None) -> None:
+        if max_error_px is not None and not max_error_px > 0:
+            raise InputError(f"max_error_px={max_error_px} is not a bound; give pixels > 0 (or None: the full mesh)")
+        self.max_error_px = max_error_px
+        self.triangles_drawn = 0  # in the last frame, after culling
         self._owns_ctx = ctx is None
         self.ctx = create_context() if ctx is None else ctx
         rgba = np.zeros(4)  # fewer than four values: the rest 0, as Framebuffer.clear's defaults
@@ -93,48 +141,92 @@ class MeshRenderer:
         self._released = False
 
     # -- scene -----------------------------------------------------------------------------------------
-    def set_mesh(self, mesh: trimesh.Trimesh | trimesh.Scene) -> None:
+    def set_mesh(self, mesh: trimesh.Trimesh | trimesh.Scene, intr: Intrinsics | None = None,
+                 nearest_m: float | None = None) -> None:
         """Upload a mesh (textured via UVs + image, or with vertex colours) replacing the previous one.
 
-        A trimesh.Scene (e.g. from a GLB file) is drawn with each node's transform applied.
+        A trimesh.Scene (e.g. from a GLB file) is drawn with each node's transform applied. With max_error_px
+        set, a textured mesh is simplified to what intr resolves at depths ≥ nearest_m (metres along the
+        optical axis), or, without them, for the first view drawn.
         """
         geometries = _scene_geometries(mesh)
         if not geometries:
             raise InputError("the mesh to render has no triangles")
+        if (intr is None) != (nearest_m is None):
+            raise ValueError("set_mesh needs both intr and nearest_m, or neither")
+        if nearest_m is not None and not nearest_m > 0:
+            raise InputError(f"nearest_m={nearest_m} is not a distance; give the nearest depth in metres (> 0)")
         corners = []
         with self.ctx:
             self._release_items()
             for geometry in geometries:
-                self._items.append(self._upload(geometry))
+                self._items.append(self._upload(geometry, intr, nearest_m))
                 corners.append(geometry.bounds)
         b = np.vstack(corners)
         self._bounds = np.array([b.min(axis=0), b.max(axis=0)])
 
-    def _upload(self, mesh: trimesh.Trimesh) -> _DrawItem:
-        vertex_order, faces = cache_friendly(mesh.vertices, mesh.faces)
-        positions = np.asarray(mesh.vertices, dtype=np.float32)[vertex_order]
+    @property
+    def triangles(self) -> int:
+        """Triangles uploaded (after simplification), over all meshes of the scene."""
+        return sum(item.geometry.n_faces for item in self._items)
+
+    def _upload(self, mesh: trimesh.Trimesh, intr: Intrinsics | None, nearest_m: float | None) -> _DrawItem:
         textured = _texture_of(mesh)
         if textured is not None:
             image, uv = textured
-            uv = uv[vertex_order]
-            # trimesh's UV v runs up the image; GL textures here are stored top row first.
-            uv = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]]).astype(np.float32)
-            vertices = np.hstack([positions, uv])
-            layout = ("3f 2f", "in_position", "in_uv")
             texture = self.ctx.texture((image.shape[1], image.shape[0]), 4, np.ascontiguousarray(image))
             texture.build_mipmaps()
             texture.filter = _TEXTURE_FILTER
             texture.repeat_x = texture.repeat_y = False
+            bound_px = self.max_error_px
+            decimation = None if bound_px is None else decimation_of(mesh.vertices, mesh.faces, uv)
+            item = _DrawItem(self._upload_geometry(mesh.vertices, mesh.faces, uv, None, 0.0), texture,
+                             decimation, pending=decimation is not None)
+            if bound_px is not None and intr is not None and nearest_m is not None:
+                self._simplify(item, ladder_floor(tolerance_m(intr, nearest_m, bound_px)))
+            return item
+        return _DrawItem(self._upload_geometry(mesh.vertices, mesh.faces, None, _vertex_colors(mesh), 0.0), None,
+                         None, pending=False)
+
+    def _upload_geometry(self, vertices: ArrayLike, faces: ArrayLike, uv: NDArray[np.float64] | None,
+                         colors: NDArray[np.float32] | None, tol_m: float) -> _Geometry:
+        vertex_order, order_faces = cache_friendly(np.asarray(vertices), np.asarray(faces))
+        positions = np.asarray(vertices, dtype=np.float32)[vertex_order]
+        if uv is not None:
+            uv = uv[vertex_order]
+            # trimesh's UV v runs up the image; GL textures here are stored top row first.
+            attribute = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]]).astype(np.float32)
+            layout = ("3f 2f", "in_position", "in_uv")
         else:
-            colors = _vertex_colors(mesh)[vertex_order]
-            vertices = np.hstack([positions, colors])
+            assert colors is not None
+            attribute = colors[vertex_order]
             layout = ("3f 4f", "in_position", "in_color")
-            texture = None
-        program = self._programs[texture is not None]
-        vbo = self.ctx.buffer(np.ascontiguousarray(vertices, dtype=np.float32))
-        ibo = self.ctx.buffer(np.ascontiguousarray(faces))
+        program = self._programs[uv is not None]
+        vbo = self.ctx.buffer(np.ascontiguousarray(np.hstack([positions, attribute]), dtype=np.float32))
+        ibo = self.ctx.buffer(np.ascontiguousarray(order_faces))
         vao = self.ctx.vertex_array(program, [(vbo, *layout)], index_buffer=ibo, index_element_size=4)
-        return _DrawItem(vbo, ibo, vao, texture, ChunkBounds.of(positions, faces))
+        return _Geometry(vbo, ibo, vao, ChunkBounds.of(positions, order_faces), positions, tol_m)
+
+    def _simplify(self, item: _DrawItem, tol_m: float) -> None:
+        """Replace the item's triangles by its mesh simplified within tol_m (the texture stays)."""
+        assert item.decimation is not None
+        simplified = item.decimation.within(tol_m)
+        geometry = self._upload_geometry(simplified.positions, simplified.faces, simplified.uv, None, tol_m)
+        item.geometry.release()
+        item.geometry, item.pending = geometry, False
+
+    def _resolve(self, item: _DrawItem, intr: Intrinsics, clip: NDArray[np.float64], near: float) -> None:
+        """Simplify the item for this view if it waits for one, or again if this view comes closer than its
+        simplification allows (its deviation would show by more than max_error_px)."""
+        bound_px = self.max_error_px
+        if item.decimation is None or bound_px is None:
+            return
+        nearest = item.geometry.nearest_depth(clip)
+        if nearest is None:
+            return  # nothing of it in view
+        nearest = max(nearest, near)
+        if item.pending or item.geometry.tolerance_m > tolerance_m(intr, nearest, bound_px):
+            self._simplify(item, ladder_floor(tolerance_m(intr, nearest * NEAR_MARGIN, bound_px)))
 
     # -- drawing ---------------------------------------------------------------------------------------
     def render(self, intr: Intrinsics, T_world_from_camera: ArrayLike, depth: bool = False,
@@ -186,16 +278,20 @@ class MeshRenderer:
         self.ctx.disable(moderngl.CULL_FACE)
         clip = _IMAGE_ROWS_DOWN @ projection_matrix(intr, near, far) @ view_matrix(T_world_from_camera)
         clip_bytes = clip.astype(np.float32).T.tobytes()  # GLSL matrices are column-major
+        self.triangles_drawn = 0
         for item in self._items:
-            program = item.vao.program
+            self._resolve(item, intr, clip, near)
+            geometry = item.geometry
+            program = geometry.vao.program
             clip_uniform = program["u_clip_from_world"]
             assert isinstance(clip_uniform, moderngl.Uniform)  # the mesh shader declares it a uniform mat4
             clip_uniform.write(clip_bytes)
             if item.texture is not None:
                 item.texture.use(0)
                 program["u_texture"] = 0
-            for first, count in item.chunks.visible_ranges(clip):
-                item.vao.render(moderngl.TRIANGLES, vertices=3 * count, first=3 * first)
+            for first, count in geometry.chunks.visible_ranges(clip):
+                geometry.vao.render(moderngl.TRIANGLES, vertices=3 * count, first=3 * first)
+                self.triangles_drawn += count
         return target
 
     def _read_color(self, fbo: moderngl.Framebuffer, intr: Intrinsics, components: int) -> NDArray[np.uint8]:
@@ -240,9 +336,7 @@ class MeshRenderer:
     # -- lifetime --------------------------------------------------------------------------------------
     def _release_items(self) -> None:
         for item in self._items:
-            item.vao.release()
-            item.vbo.release()
-            item.ibo.release()
+            item.geometry.release()
             if item.texture is not None:
                 item.texture.release()
         self._items = []

@@ -20,6 +20,7 @@ from arproj.session import tolerances as tol
 from arproj.session.wallmap import WallMap
 from geometry.intrinsics import Intrinsics
 from render import MeshRenderer
+from render.simplify import PROJECTED_ERROR_PX
 
 SIGMA_QUANTUM_M = 0.0005  # bands are redrawn when the registration σ changes by this much, not every frame
 CHECK_MARK_RADIUS_M = 0.008
@@ -57,7 +58,9 @@ class MapProjector:
         self.projector = projector
         # The map and the closed loop's check marks each keep their own renderer (mesh and texture): every
         # update shows marks, then the map, and redrawing the map's overlays each time costs seconds.
-        self._renderers = {"map": MeshRenderer(ctx=ctx), "marks": MeshRenderer(ctx=ctx)}  # type: ignore[arg-type]
+        # Each draws its mesh simplified to what the projector resolves (render.simplify).
+        self._renderers = {name: MeshRenderer(ctx=ctx, max_error_px=PROJECTED_ERROR_PX)  # type: ignore[arg-type]
+                           for name in ("map", "marks")}
         self._keys: dict[str, tuple | None] = {"map": None, "marks": None}
         self._rasters: dict[str, overlays.WallRaster | None] = {"map": None, "marks": None}
         self._active = "map"

@@ -89,14 +89,16 @@ def test_a_culled_render_equals_an_unculled_one(gl_context: moderngl.Context) ->
     with MeshRenderer(ctx=gl_context) as renderer:
         renderer.set_mesh(mesh)
         culled = renderer.render(INTR, T, depth=True)
-        item = renderer._items[0]
-        drawn = sum(count for _, count in item.chunks.visible_ranges(
+        geometry = renderer._items[0].geometry
+        drawn = sum(count for _, count in geometry.chunks.visible_ranges(
             np.diag([1.0, -1.0, 1.0, 1.0]) @ _clip(T)))
+        assert drawn == renderer.triangles_drawn
         assert drawn < 0.5 * len(mesh.faces)  # culling leaves most of the wall undrawn (this view sees a corner)
-        n_chunks = len(item.chunks.lo)
-        item.chunks = ChunkBounds(lo=np.full((n_chunks, 3), -1e9), hi=np.full((n_chunks, 3), 1e9),
+        n_chunks = len(geometry.chunks.lo)
+        geometry.chunks = ChunkBounds(lo=np.full((n_chunks, 3), -1e9), hi=np.full((n_chunks, 3), 1e9),
                                   n_faces=len(mesh.faces))  # every chunk in view: everything drawn
         unculled = renderer.render(INTR, T, depth=True)
+        assert renderer.triangles_drawn == len(mesh.faces)
     assert (culled.color == unculled.color).all()
     np.testing.assert_array_equal(culled.depth, unculled.depth)
     assert (culled.color[..., :3] > 0).mean() > 0.9  # the wall fills the view

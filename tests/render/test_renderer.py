@@ -175,7 +175,7 @@ def test_every_gpu_object_is_released(gl_context: moderngl.Context) -> None:
     renderer = MeshRenderer(ctx=gl_context)
     renderer.set_mesh(checkerboard_mesh())
     renderer.render(LENS_SHIFTED.scaled(0.25), look_at([0.2, 0.2, 1], [0.2, 0.2, 0], up=[0, 1, 0]))
-    owned = [item.vao for item in renderer._items] + [t.fbo for t in renderer._targets.values()]
+    owned = [item.geometry.vao for item in renderer._items] + [t.fbo for t in renderer._targets.values()]
     renderer.release()
     assert all(isinstance(obj.mglo, moderngl.InvalidObject) for obj in owned)
     with pytest.raises(RuntimeError, match="after release"):
