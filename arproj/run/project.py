@@ -243,7 +243,8 @@ def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options:
                         say(f"[yellow]warning:[/] {err}")
             decision = session.update()
             cycle = {"cycle": k, "show_map": decision.show_map, "reasons": decision.reasons,
-                     "bound_mm": None if not np.isfinite(decision.bound_m) else round(decision.bound_m * 1000, 3)}
+                     "bound_mm": None if not np.isfinite(decision.bound_m) else round(decision.bound_m * 1000, 3),
+                     "frame_says": list(session.last_words)}
             reg = session.registration
             if reg is not None and reg.loop is not None and len(reg.loop.errors_xy):
                 e = np.linalg.norm(reg.loop.errors_xy, axis=1) * 1000
