@@ -307,7 +307,7 @@ def _interactive(session: object, commands: Iterable[str], result: dict, say: Ca
                 d = session.last_decision  # type: ignore[attr-defined]
                 say("no decision yet" if d is None else
                     f"{'map shown' if d.show_map else 'warning'}; bound ±{d.bound_m * 1000:.1f} mm; "
-                    f"{'; '.join(session.log[-3:])}")  # type: ignore[attr-defined]
+                    f"{'; '.join(list(session.log)[-3:])}")  # type: ignore[attr-defined]
             elif verb not in ("aim", "drill"):
                 say(f"unknown command {verb!r}; {COMMAND_HELP}")
         except ValueError:

@@ -15,6 +15,7 @@ the legend, or a warning that says why.
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,6 +42,7 @@ HEAD_MOVED_DEG = 0.005  # reported angles that differ by more than this since th
 CLOSED_LOOP_MARKS = 48  # check marks per closed-loop frame
 HEAD_MODEL_FALLBACK_DEG = 10.0  # projector-pose prior when the head model disagrees with the pattern
 HEAD_MODEL_FALLBACK_M = 0.05
+LOG_LINES = 1000  # the session log keeps this many last lines (a line or two a cycle: minutes of cycles)
 # The craftsman's words (as gate.SAY_*) for a head found off its model while its encoder saw nothing: the map is
 # measured again from the pattern and still shown, but the mount slipped and a person must look at it.
 SAY_HEAD_SLIPPED = "The projector head slipped; the picture was measured again. Tell the operator."
@@ -115,7 +117,7 @@ class ProjectionSession:
         self.last_pattern_capture: tuple | None = None  # (pattern, left image, right image, head angles)
         self.head_slipped = False  # the current registration found the head off where its encoder says
         self.last_words: list[str] = []  # what the last frame says in words (legend lines or warning)
-        self.log: list[str] = []
+        self.log: deque[str] = deque(maxlen=LOG_LINES)  # bounded: a session may run for days
 
     def __enter__(self) -> ProjectionSession:
         return self
