@@ -157,12 +157,17 @@ def head_client(faults: FaultConfig) -> Iterator[Client]:
         # move_to: the settle deadline, then one more poll (a sleep and two queries) at most; before it the
         # first position() (two queries)
         position_s = 2 * head.link.exchange_bound_s(RETRIES)
-        def settled_position() -> object:  # after a failed move the head is still on its way for up to 30 ms
-            time.sleep(0.04)
+        def settled_position() -> object:
+            """The head's answer once it stands still: after a failed move it is on its way for up to 30 ms
+            (longer when a loaded host hands the simulator its set commands late)."""
+            deadline, last = time.monotonic() + 2.0, None
+            while time.monotonic() < deadline and (now := sim.reported_deg()) != last:
+                last = now
+                time.sleep(0.03)
             return head.position()
 
         requests = [
-            Request("pan and tilt queries", settled_position, 2, where_the_head_says, extra_s=0.04),
+            Request("pan and tilt queries", settled_position, 2, where_the_head_says, extra_s=2.03),
             Request("move", lambda: head.move_to(*next(targets)), 0, where_the_head_says,
                     extra_s=head.settle_timeout_s + 0.02 + 2 * position_s),
         ]
