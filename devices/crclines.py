@@ -157,9 +157,10 @@ class TaggedClient:
                                f"{command!r}")
         return fields[1:count + 1]
 
-    def fetch_indexed(self, count: int, width: int, chunk: int, parse: RowParser) -> np.ndarray:
-        """Rows 0..count-1 of the device's buffer, (count, width) int64, by `GET <first> <chunk>` requests;
-        rows a damaged line lost are fetched again (DeviceError when `retries` requests bring nothing new)."""
+    def fetch_indexed(self, count: int, width: int, chunk: int, parse: RowParser, rows_per_line: int = 1) -> np.ndarray:
+        """Rows 0..count-1 of the device's buffer, (count, width) int64, by `GET <first> <chunk>` requests whose
+        answers hold rows_per_line rows a line; rows a damaged line lost are fetched again (DeviceError when
+        `retries` requests bring nothing new)."""
         rows = np.zeros((count, width), dtype=np.int64)
         have = np.zeros(count, dtype=bool)
         failures = 0
@@ -170,7 +171,8 @@ class TaggedClient:
             before = int(have.sum())
             first = int(missing[0])
             size = min(chunk, count - first)
-            for fields in self.request(f"GET {first} {size}", multi=size):
+            lines = -(-size // rows_per_line)  # the answer's length bounds the request's deadline
+            for fields in self.request(f"GET {first} {size}", multi=lines):
                 try:
                     parsed = list(parse(fields))
                 except ValueError:

@@ -92,5 +92,5 @@ class Laser2D(TaggedClient):
                 raise LaserError(f"laser ({self.link.url}) reported a negative range in rays {k}..")
             return [(k + i, (v,)) for i, v in enumerate(values)]
 
-        mm = self.fetch_indexed(n, 1, GET_CHUNK, ranges)[:, 0]
+        mm = self.fetch_indexed(n, 1, GET_CHUNK, ranges, rows_per_line=RANGES_PER_LINE)[:, 0]
         return ray_angles(angle0, step, n), ranges_from_mm(mm)

@@ -28,6 +28,7 @@ from devices.errors import DeviceError, DeviceTimeoutError, DisconnectedError, F
 POLL_S = 0.01  # granularity of the read deadline
 MAX_LINE_BYTES = 4096  # longer "lines" are garbage: dropped so a device spewing noise cannot exhaust memory
 BUSY_PREFIX = b"BUSY "  # a device (simulator) that already has a controlling host sends this line, then hangs up
+SOCKET_CLOSE_S = 0.3  # pyserial's socket:// close() sleeps this long ("give the server some time")
 _TAIL_BYTES = 256  # the last bytes received, kept to read a BUSY line when the device hangs up
 
 # Framer[Received, Sent]: feed() gives Received frames, encode() takes Sent ones. Most protocols use one type both
@@ -41,11 +42,13 @@ Answer = TypeVar("Answer")
 @dataclass(frozen=True)
 class Noise:
     """The bytes a wire carries, for the fault injector to imitate: inserted garbage bytes from range
-    [insert[0], insert[1]), junk frames of junk_length[0]..junk_length[1]-1 bytes from [junk[0], junk[1])."""
+    [insert[0], insert[1]), junk frames of junk_length[0]..junk_length[1]-1 bytes from [junk[0], junk[1]);
+    endless: a byte that never completes a frame, what a device sends that talks without ever ending one."""
 
     insert: tuple[int, int]
     junk: tuple[int, int]
     junk_length: tuple[int, int]
+    endless: bytes = b"~"
 
 
 # Printable ASCII: inserted bytes without space (a space would split fields); junk lines may hold spaces.
@@ -209,6 +212,16 @@ class SerialLink(Generic[Received, Sent]):
                         raise on_reconnect() from None
         raise DeviceTimeoutError(f"{self.name} at {self.url} did not answer {what or repr(frame)} after {retries + 1} "
                                  f"tries of {try_s:.2g} s (last: {last_fault})", self.hint)
+
+    def exchange_bound_s(self, retries: int, timeout_s: float | None = None) -> float:
+        """The longest exchange(retries=retries, timeout_s=timeout_s) takes whatever the device sends, as its
+        docstring says: every try runs to its deadline, plus the poll that crosses it, and ends in the slowest
+        reconnect (every attempt's wait, and the close before it: pyserial's socket:// close sleeps 0.3 s to give
+        a server time). Scheduling delays of a loaded host come on top."""
+        try_s = self.timeout_s if timeout_s is None else timeout_s
+        close_s = SOCKET_CLOSE_S if self.url.startswith("socket://") else 0.0
+        reconnect_s = close_s + sum(self.reconnect_delay_s * min(1 + a, 10) for a in range(self.reconnect_attempts))
+        return (retries + 1) * (try_s + POLL_S + reconnect_s)
 
     # ------------------------------------------------------------------ frames
     def send(self, frame: Sent) -> None:

@@ -24,6 +24,8 @@ import time
 from dataclasses import dataclass
 from types import TracebackType
 
+import numpy as np
+
 from devices.errors import DeviceError
 from devices.link import Noise, SerialLink
 
@@ -108,33 +110,36 @@ class PelcoDFramer:
     """
 
     terminator = b""
-    noise = Noise(insert=(0, 256), junk=(0, 256), junk_length=(1, 9))  # any byte, 0xFF (sync) included
+    # any byte, 0xFF (sync) included; endless sync bytes are the framer's worst case (each one starts a frame)
+    noise = Noise(insert=(0, 256), junk=(0, 256), junk_length=(1, 9), endless=bytes([SYNC]))
 
     def __init__(self) -> None:
         self._buffer = bytearray()
         self.rejected_bytes = 0
 
     def feed(self, data: bytes) -> list[Frame]:
+        # Vectorised: a frame starts at a sync byte whose checksum holds. A byte-by-byte resync loop spent
+        # ~1 s of Python per MiB on a device flooding sync bytes, holding a read far past its deadline.
         self._buffer.extend(data)
+        buf = np.frombuffer(bytes(self._buffer), dtype=np.uint8)
+        n = len(buf)
         frames: list[Frame] = []
-        while True:
-            start = self._buffer.find(SYNC)
-            if start < 0:
-                self.rejected_bytes += len(self._buffer)
-                self._buffer.clear()
-                break
-            if start > 0:
-                self.rejected_bytes += start
-                del self._buffer[:start]
-            if len(self._buffer) < FRAME_LENGTH:
-                break
-            body = bytes(self._buffer[1:6])
-            if checksum(body) == self._buffer[6]:
-                frames.append(Frame(*body))
-                del self._buffer[:FRAME_LENGTH]
-            else:  # not a frame start after all (or corrupted): skip this sync byte and look again
-                self.rejected_bytes += 1
-                del self._buffer[:1]
+        pos = 0  # everything before pos is a frame taken or a byte rejected
+        if n >= FRAME_LENGTH:
+            starts = n - FRAME_LENGTH + 1
+            sums = np.concatenate((np.zeros(1, np.uint8), np.cumsum(buf, dtype=np.uint8)))  # wraps: mod 256
+            body_sum = sums[6:6 + starts] - sums[1:1 + starts]
+            for i in np.flatnonzero((buf[:starts] == SYNC) & (body_sum == buf[6:6 + starts])).tolist():
+                if i >= pos:  # not inside the frame just taken
+                    frames.append(Frame(*buf[i + 1:i + 6].tolist()))
+                    self.rejected_bytes += i - pos
+                    pos = i + FRAME_LENGTH
+        # keep the first sync byte too close to the end to hold a whole frame; reject everything before it
+        tail = max(pos, n - FRAME_LENGTH + 1)
+        syncs = np.flatnonzero(buf[tail:] == SYNC)
+        keep = tail + int(syncs[0]) if syncs.size else n
+        self.rejected_bytes += keep - pos
+        del self._buffer[:keep]
         return frames
 
     def encode(self, frame: Frame) -> bytes:

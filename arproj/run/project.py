@@ -271,7 +271,8 @@ def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options:
                         say(f"[yellow]warning:[/] {err}")
             decision = session.update()
             cycle = {"cycle": k, "show_map": decision.show_map, "reasons": decision.reasons,
-                     "bound_mm": None if not np.isfinite(decision.bound_m) else round(decision.bound_m * 1000, 3)}
+                     "bound_mm": None if not np.isfinite(decision.bound_m) else round(decision.bound_m * 1000, 3),
+                     "frame_says": list(session.last_words)}
             reg = session.registration
             if reg is not None and reg.loop is not None and len(reg.loop.errors_xy):
                 e = np.linalg.norm(reg.loop.errors_xy, axis=1) * 1000
@@ -334,7 +335,7 @@ def _interactive(session: object, commands: Iterable[str], result: dict, say: Ca
                 d = session.last_decision  # type: ignore[attr-defined]
                 say("no decision yet" if d is None else
                     f"{'map shown' if d.show_map else 'warning'}; bound ±{d.bound_m * 1000:.1f} mm; "
-                    f"{'; '.join(session.log[-3:])}")  # type: ignore[attr-defined]
+                    f"{'; '.join(list(session.log)[-3:])}")  # type: ignore[attr-defined]
             elif verb not in ("aim", "drill"):
                 say(f"unknown command {verb!r}; {COMMAND_HELP}")
         except ValueError:

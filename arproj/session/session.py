@@ -15,6 +15,7 @@ the legend, or a warning that says why.
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,6 +42,10 @@ HEAD_MOVED_DEG = 0.005  # reported angles that differ by more than this since th
 CLOSED_LOOP_MARKS = 48  # check marks per closed-loop frame
 HEAD_MODEL_FALLBACK_DEG = 10.0  # projector-pose prior when the head model disagrees with the pattern
 HEAD_MODEL_FALLBACK_M = 0.05
+LOG_LINES = 1000  # the session log keeps this many last lines (a line or two a cycle: minutes of cycles)
+# The craftsman's words (as gate.SAY_*) for a head found off its model while its encoder saw nothing: the map is
+# measured again from the pattern and still shown, but the mount slipped and a person must look at it.
+SAY_HEAD_SLIPPED = "The projector head slipped; the picture was measured again. Tell the operator."
 
 
 @dataclass
@@ -110,7 +115,9 @@ class ProjectionSession:
         self.last_evidence: gate.RegistrationEvidence | None = None
         self.last_frame: NDArray[np.uint8] | None = None
         self.last_pattern_capture: tuple | None = None  # (pattern, left image, right image, head angles)
-        self.log: list[str] = []
+        self.head_slipped = False  # the current registration found the head off where its encoder says
+        self.last_words: list[str] = []  # what the last frame says in words (legend lines or warning)
+        self.log: deque[str] = deque(maxlen=LOG_LINES)  # bounded: a session may run for days
 
     def __enter__(self) -> ProjectionSession:
         return self
@@ -223,6 +230,7 @@ class ProjectionSession:
         distance_guess = float(np.clip(T_wall_from_projector_prior[2, 3] / max(-n_p[2], 0.05), 0.3, 15.0))
         incidence_guess = float(np.degrees(np.arctan2(-n_p[0], -n_p[2])))
         self.registration = None
+        self.head_slipped = False
         try:
             pattern = choose_pattern(views, distance_guess, incidence_guess)
             left, right = self.robot.capture(pattern.image())
@@ -236,6 +244,7 @@ class ProjectionSession:
                 # projector's pose from the pattern itself; the closed loop and the gate still judge the result.
                 plane = estimate_plane(left, right, pattern, views, uncertainty=Uncertainty(
                     projector_rotation_deg=HEAD_MODEL_FALLBACK_DEG, projector_translation_m=HEAD_MODEL_FALLBACK_M))
+                self.head_slipped = True
                 self.log.append(f"head model disagrees with the pattern (projector "
                                 f"{plane.projector_correction_deg:.2f}° / {plane.projector_correction_m * 1000:.1f} mm "
                                 "off): its pose was measured from the pattern instead — recalibrate the head")
@@ -355,8 +364,10 @@ class ProjectionSession:
     def render_frame(self, decision: gate.GateDecision) -> NDArray[np.uint8]:
         """The map (pre-warped, with legend and status) when the gate is open, else the warning."""
         intr = self.projector_intr
+        slipped = [SAY_HEAD_SLIPPED] if self.head_slipped else []
         if not decision.show_map or self.registration is None:
-            return overlays.warning_frame(intr.width, intr.height, decision.craftsman)
+            self.last_words = decision.craftsman + [w for w in slipped if w not in decision.craftsman]
+            return overlays.warning_frame(intr.width, intr.height, self.last_words)
         trusted = self.registration.trusted
         clip = None if trusted is None else trusted.polygon
         self.map_projector.set_overlays(decision.registration_sigma_m, self.drill_xy, clip=clip)
@@ -366,7 +377,8 @@ class ProjectionSession:
             lines.append(f"map limited to the well-registered {100 * trusted.share:.0f} % (outlined)")
         if self.drill_xy is not None:
             lines.append(f"drill: {self.drill_check(self.drill_xy).message}")
-        return overlays.draw_legend(frame, lines)
+        self.last_words = slipped + lines  # the slip first: it is what the craftsman must act on
+        return overlays.draw_legend(frame, self.last_words)
 
     def update(self, force: bool = False, show: bool = True) -> gate.GateDecision:
         """One cycle: re-estimate when needed, verify, decide, show (show=False: decide only, the frame not
@@ -386,6 +398,9 @@ class ProjectionSession:
                     np.linalg.norm(loop.offset_xy) > tol.CLOSED_LOOP_MAX_CORRECTION_M and not needs_estimate:
                 self.log.append("projection landed off: re-estimating the wall pose")
                 if self.estimate() is not None:
+                    # the head reported no motion, yet the picture landed off: its mount slipped (or the
+                    # projector moved on it); the new estimate measured it, the craftsman is told on the frame
+                    self.head_slipped = True
                     self.verify()
         decision = self.decide()
         if show:

@@ -2,7 +2,11 @@
 
 Per frame a simulator sends (`FaultConfig.rate`, the kind drawn by `weights`): garbage bytes inside the frame,
 a junk frame before it, the frame truncated, the frame dropped (the host times out), one byte corrupted, or
-the device disappearing (the connection closed, refused for `down_s`, then back after a reset). Per command a
+the device disappearing (the connection closed, refused for `down_s`, then back after a reset). A hostile device
+does worse: it vanishes mid-frame (`vanish`: half the frame sent, then the connection closed), or keeps talking
+instead of answering until the host sends again (at most `talk_s`): `stream` sends frames that are not the
+answer (the device's `chatter`: status lines, answers under another id or address), `flood` bytes that never
+end a frame (megabytes without a newline). Per command a
 device obeys without answering (`ignore_rate`): the command ignored, which the host sees only by the device's
 behaviour. `delay_s` makes every answer late. The bytes garbage and junk are made of are the framer's
 (`devices.link.Noise`): printable text on a line protocol, any byte on a binary one. Counters say what was
@@ -18,7 +22,8 @@ import numpy as np
 
 from devices.link import Noise
 
-FAULT_KINDS = ("garbage", "junk", "truncate", "drop", "disconnect", "corrupt")
+FAULT_KINDS = ("garbage", "junk", "truncate", "drop", "disconnect", "corrupt", "vanish", "stream", "flood")
+SERVER_KINDS = ("disconnect", "vanish", "stream", "flood")  # the server acts on these, not apply()
 
 
 @dataclass
@@ -30,6 +35,8 @@ class FaultConfig:
     seed: int = 0
     ignore_rate: float = 0.0  # probability that a command the device obeys without answering is ignored
     delay_s: float = 0.0  # every answer is sent this late (a slow device)
+    talk_s: float = 30.0  # how long a device that keeps talking (stream, flood) goes on while the host is silent
+    talk_bytes_s: float = 16e6  # and how fast: far beyond a serial line, within what a host reads
 
 
 class FaultInjector:
@@ -53,7 +60,7 @@ class FaultInjector:
         if self.config.rate <= 0 or self.rng.random() >= self.config.rate:
             return None
         kind = str(self.rng.choice(self.kinds, p=self.p))
-        if kind == "disconnect" and not allow_disconnect:
+        if kind in ("disconnect", "vanish") and not allow_disconnect:
             kind = "garbage"
         self.counts[kind] += 1
         return kind
@@ -66,10 +73,12 @@ class FaultInjector:
         return hit
 
     def apply(self, kind: str | None, data: bytes, noise: Noise, terminator: bytes) -> bytes:
-        """The bytes sent for a frame `data` (without its terminator) hit by fault `kind` (None: none; "drop"
-        and "disconnect" are the server's to act on)."""
+        """The bytes sent for a frame `data` (without its terminator) hit by fault `kind` (None: none;
+        SERVER_KINDS are the server's to act on)."""
         if kind == "drop":
             return b""
+        if kind in SERVER_KINDS:
+            raise ValueError(f"fault {kind!r} is the server's to act on, not a change of the frame's bytes")
         if kind == "garbage":
             data = self._garble(data, noise)
         elif kind == "truncate":
@@ -78,7 +87,7 @@ class FaultInjector:
             at = int(self.rng.integers(0, len(data)))
             data = data[:at] + bytes([data[at] ^ int(self.rng.integers(1, 256))]) + data[at + 1:]
         elif kind == "junk":
-            return self._junk(noise) + terminator + data + terminator
+            return self.junk_frame(noise) + terminator + data + terminator
         return data + terminator
 
     def _garble(self, data: bytes, noise: Noise) -> bytes:
@@ -86,5 +95,5 @@ class FaultInjector:
         at = int(self.rng.integers(0, len(data) + 1))
         return data[:at] + junk + data[at:]
 
-    def _junk(self, noise: Noise) -> bytes:
+    def junk_frame(self, noise: Noise) -> bytes:
         return bytes(self.rng.integers(*noise.junk, int(self.rng.integers(*noise.junk_length))).astype(np.uint8))

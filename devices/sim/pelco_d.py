@@ -115,6 +115,11 @@ class HeadSimulator(SimDevice):
             self._t_start = time.monotonic()
 
     # -- the wire (a SimDevice) ------------------------------------------------------------------------
+    def chatter(self, answer: pelco_d.Frame) -> pelco_d.Frame:
+        """The reply of another head on the bus (the next address): a sound frame that is not ours."""
+        return pelco_d.Frame((answer.address + 1) % 256, answer.command1, answer.command2, answer.data1,
+                             answer.data2)
+
     def answers(self, frame: pelco_d.Frame) -> bool:
         return frame.command2 not in (pelco_d.SET_PAN, pelco_d.SET_TILT)
 

@@ -40,6 +40,11 @@ class SimDevice(ABC):
         nothing."""
         return
 
+    def chatter(self, answer: Any) -> Any | None:
+        """A frame this device might send instead of `answer` while it keeps talking (a status report, an
+        answer under another id or address); None: junk frames of the framer's noise."""
+        return None
+
     def answers(self, frame: Any) -> bool:
         """Whether the device answers this frame; one it obeys silently (a set command) may be ignored by the
         fault injector, since only the device's behaviour shows that it was lost."""
@@ -137,6 +142,29 @@ class DeviceServer(threading.Thread):
                 other.shutdown(socket.SHUT_RDWR)
         return True
 
+    def _keep_talking(self, conn: socket.socket, framer: Framer[Any, Any], answer: Any, kind: str) -> bool:
+        """Send chatter frames (stream) or bytes that never end a frame (flood) instead of `answer` until the
+        host sends again or hangs up, at most talk_s; at most talk_bytes_s bytes a second, as a device behind a
+        UART's few bytes of buffer can (a socket would queue megabytes the host must read before the answer).
+        False when the host is gone."""
+        if kind == "flood":
+            chunk = framer.noise.endless * 16384
+        else:
+            said = self.device.chatter(answer)
+            chunk = (self.faults.junk_frame(framer.noise) if said is None else framer.encode(said)) + framer.terminator
+        pause_s = max(0.001, len(chunk) / self.faults.config.talk_bytes_s)
+        end = time.monotonic() + self.faults.config.talk_s
+        while not self.stopping.is_set() and time.monotonic() < end:
+            if select.select([conn], [], [], pause_s)[0]:
+                return True  # the host said something (or hung up): the serve loop reads it
+            try:
+                conn.sendall(chunk)
+            except TimeoutError:
+                continue  # the host is not reading: its buffer is full, wait for it
+            except OSError:
+                return False
+        return True
+
     def _serve(self, conn: socket.socket) -> None:
         conn.settimeout(0.05)
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -161,12 +189,22 @@ class DeviceServer(threading.Thread):
                 out = bytearray()
                 for index, answer in enumerate(self.device.handle(frame)):
                     fault = self.faults.pick(allow_disconnect=index == 0)
-                    if fault == "disconnect":
+                    if fault in ("disconnect", "vanish"):  # gone before the frame, or in the middle of it
                         self.down_until = time.monotonic() + self.faults.config.down_s
-                        if out:
+                        if fault == "vanish":
+                            data = framer.encode(answer)
+                            out += data[:len(data) // 2]
+                        with contextlib.suppress(OSError):
                             conn.sendall(bytes(out))
-                        conn.shutdown(socket.SHUT_RDWR)
+                            conn.shutdown(socket.SHUT_RDWR)
                         return
+                    if fault in ("stream", "flood"):  # this answer is never sent: the host must ask again
+                        with contextlib.suppress(OSError):
+                            conn.sendall(bytes(out))
+                        out = bytearray()
+                        if not self._keep_talking(conn, framer, answer, fault):
+                            return
+                        break
                     out += self.faults.apply(fault, framer.encode(answer), framer.noise, framer.terminator)
                 if out and self.faults.config.delay_s > 0:
                     time.sleep(self.faults.config.delay_s)

@@ -15,6 +15,11 @@ class TaggedLineSim(SimDevice):
 
     framer = CrcLineFramer
 
+    def chatter(self, answer: str) -> str:
+        """The answer under id 0, which no host request carries (ids are 1..65535): a sound line that answers
+        something else."""
+        return "#0 " + answer.split(" ", 1)[-1]
+
     def handle(self, frame: str | Damaged) -> list[str]:
         if isinstance(frame, Damaged):
             words = frame.text.split()

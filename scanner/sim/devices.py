@@ -64,6 +64,10 @@ class GrblSim(SimDevice):
             self.position = target
         self.pending.clear()
 
+    def chatter(self, answer: str) -> str:
+        """GRBL keeps talking in status reports (as while homing): the one unsolicited frame it has."""
+        return self.handle("?")[0]
+
     def handle(self, line: str) -> list[str]:
         d = self.world.drives
         line = line.strip()

@@ -31,3 +31,21 @@ def test_decoder_resynchronises_and_rejects_corrupted_frames():
     assert [f.data for f in frames] == [0, 0xFFFF, 0x00FF, 12345]
     assert all(f.command2 == pelco_d.REPLY_PAN for f in frames)
     assert decoder.rejected_bytes >= 7
+
+
+def test_decoding_does_not_depend_on_how_the_bytes_arrive():
+    """Frames, sync bytes and noise fed whole, byte by byte, or in random pieces: the same frames, the same
+    rejected bytes (nothing kept past a frame's length)."""
+    rng = np.random.default_rng(11)
+    parts = [pelco_d.encode(1, pelco_d.REPLY_PAN, int(d)) for d in rng.integers(0, 36000, 40)]
+    parts += [b"\xff" * int(k) for k in rng.integers(1, 12, 20)]
+    parts += [bytes(rng.integers(0, 256, int(k), dtype=np.uint8)) for k in rng.integers(1, 20, 20)]
+    stream = b"".join(parts[i] for i in rng.permutation(len(parts)))
+    results = []
+    for cuts in ([], list(range(1, len(stream))), sorted(rng.choice(len(stream), 30, replace=False).tolist())):
+        decoder = pelco_d.PelcoDFramer()
+        pieces = [stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True)]
+        frames = [f for piece in pieces for f in decoder.feed(piece)]
+        results.append((frames, decoder.rejected_bytes, len(decoder._buffer)))
+    assert results[0] == results[1] == results[2]
+    assert len(results[0][0]) >= 40 and results[0][2] < pelco_d.FRAME_LENGTH

@@ -34,7 +34,8 @@ def test_a_thousand_seeded_faults_lose_no_sample(small_wall):
     reference = run_scan(small_wall, DirectBackend(world), robot, plan_kind="dense", sensor=sensor, drives=drives)
     world, robot = simulated_site(small_wall, sensor, drives, 11)
     faults = FaultConfig(rate=0.03, seed=5, down_s=0.02, weights={
-        "garbage": 0.3, "junk": 0.25, "truncate": 0.25, "drop": 0.1, "disconnect": 0.5})
+        "garbage": 0.3, "junk": 0.25, "truncate": 0.25, "drop": 0.1, "disconnect": 0.5,
+        "vanish": 0.1, "stream": 0.05, "flood": 0.05})  # the hostile ones too (tests/devices/test_soak.py)
     with simulated_devices(world, robot, faults, timeout_s=0.03, max_pass_attempts=30) as devices:
         result = run_scan(small_wall, devices.backend, devices.robot, plan_kind="dense", sensor=sensor,
                           drives=drives)
@@ -42,7 +43,8 @@ def test_a_thousand_seeded_faults_lose_no_sample(small_wall):
         injected = servers["drives"].faults.counts + servers["scanner"].faults.counts
         reconnects = servers["drives"].connections + servers["scanner"].connections - 2
     assert sum(injected.values()) >= 1000
-    assert all(injected[k] > 0 for k in ("garbage", "junk", "truncate", "drop", "disconnect"))
+    assert all(injected[k] > 0 for k in ("garbage", "junk", "truncate", "drop", "disconnect", "vanish", "stream",
+                                         "flood")), injected
     assert reconnects >= 3 and devices.backend.pass_restarts >= 3
     for key, values in reference.samples.items():
         np.testing.assert_array_equal(result.samples[key], values, err_msg=key)
