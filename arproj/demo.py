@@ -524,10 +524,11 @@ def _load_state(ctx: DemoContext) -> set[str]:
     path = ctx.out / STATE_FILE
     if not path.exists():
         return set()
-    try:
-        state = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise InputError(f"{path}: not valid JSON ({err.msg})", "delete it, or run without --resume") from None
+    from geometry.inputs import parse_json, read_text
+
+    # written by json.dumps, which writes NaN for a figure that has none: those constants are ours
+    hint = "delete it, or run without --resume"
+    state = parse_json(read_text(path, "demo state", 64 << 20, hint), str(path), hint, constants=True)
     if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
         raise InputError(f"{path}: written by another version of the demo", "run without --resume to start over")
     if state.get("wall_fingerprint") != ctx.wall.fingerprint() or state.get("quick") != ctx.options.quick \

@@ -163,10 +163,9 @@ def write_urls(path: Path, request: ServeRequest, served: dict[str, dict[str, st
 
 def read_urls(path: Path) -> dict[str, str]:
     """{device: URL} from a file write_urls made."""
-    try:
-        document = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as err:
-        raise InputError(f"{path}: cannot read the device URLs ({err})") from None
+    from geometry.inputs import load_document
+
+    document = load_document(path, "device URL file", "give the file `arproj devices serve --urls` wrote")
     if not isinstance(document, dict) or document.get("format") != URLS_FORMAT or \
             not isinstance(document.get("urls"), dict):
         raise InputError(f"{path}: not a device URL file (format {URLS_FORMAT}, from `arproj devices serve --urls`)")

@@ -14,7 +14,6 @@ from typing import TYPE_CHECKING, Protocol
 
 import cv2
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from arproj.session.output import FrameOutput
@@ -221,17 +220,15 @@ def open_camera(source: str, intr: Intrinsics, name: str) -> cv2.VideoCapture:
 
 def read_wall_prior(path: str | Path) -> NDArray[np.float64]:
     """T_wall_from_robot from a YAML file {T_wall_from_robot: [[...], ...]} (4x4, metres)."""
+    from geometry.inputs import float_array, load_document, mapping
+
     path = Path(path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-        T = np.asarray(doc["T_wall_from_robot"], dtype=np.float64)
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such wall-prior file") from None
-    except (yaml.YAMLError, KeyError, TypeError, ValueError):
-        raise InputError(f"{path}: expected YAML with T_wall_from_robot: a 4x4 list") from None
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise InputError(f"{path}: T_wall_from_robot must be a finite 4x4 matrix")
-    return T
+    hint = "give --wall-prior a YAML file {T_wall_from_robot: [[...], ...]} (4x4, metres)"
+    doc = mapping(str(path), "the document", load_document(path, "wall-prior file", hint), hint=hint)
+    if "T_wall_from_robot" not in doc:
+        raise InputError(f"{path}: expected YAML with T_wall_from_robot: a 4x4 list", hint)
+    return float_array(str(path), "T_wall_from_robot", doc["T_wall_from_robot"], (4, 4), lo=-1000.0, hi=1000.0,
+                       hint=hint)
 
 
 LASER_HEAD = "H"  # the projection robot's 2-D laser head that scans the horizontal plane

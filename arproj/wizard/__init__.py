@@ -50,11 +50,11 @@ def _load_state(out: Path) -> dict[str, Any] | None:
     path = out / STATE_FILE
     if not path.exists():
         return None
-    try:
-        state = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise InputError(f"{path}: the wizard state is not valid JSON ({err.msg})",
-                         "delete it or run with --restart") from None
+    from geometry.inputs import parse_json, read_text
+
+    # written by json.dumps, which writes NaN for a figure that has none: those constants are ours
+    hint = "delete it or run with --restart"
+    state = parse_json(read_text(path, "wizard state", 64 << 20, hint), str(path), hint, constants=True)
     if not isinstance(state, dict) or state.get("version") != 1 or not isinstance(state.get("steps"), dict):
         raise InputError(f"{path}: not an arproj wizard state file", "delete it or run with --restart")
     return state

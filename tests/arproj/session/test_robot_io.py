@@ -45,7 +45,7 @@ def test_wall_prior_file(tmp_path):
     assert read_wall_prior(good)[0, 3] == 2.5
     bad = tmp_path / "bad.yaml"
     bad.write_text("T_wall_from_robot: [[1, 0], [0, 1]]\n")
-    with pytest.raises(InputError, match="must be a finite 4x4"):
+    with pytest.raises(InputError, match="must be a list of 4x4 numbers"):
         read_wall_prior(bad)
     with pytest.raises(InputError, match="no such wall-prior file"):
         read_wall_prior(tmp_path / "missing.yaml")
@@ -81,3 +81,15 @@ def test_device_laser_reads_the_sites_laser_through_the_laser_protocol():
         assert ok.sum() > 0.9 * len(angles)
         # 5σ of the difference of two sweeps (σ 1 cm each); the few outlier beams (0.5 % a sweep) aside
         assert np.mean(difference[ok] < 5 * np.hypot(0.01, 0.01)) > 0.98
+
+
+@pytest.mark.parametrize("text", ["T_wall_from_robot: [[1e400, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]",
+                                  "T_wall_from_robot: [[" + "9" * 400 + ", 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], "
+                                  "[0, 0, 0, 1]]", "a: &a [1, 1]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]\n"
+                                  "c: [*b, *b, *b, *b, *b, *b, *b, *b, *b]\nd: [*c, *c, *c, *c, *c, *c, *c, *c]",
+                                  "[1, 2]", "\x00\x01binary"])
+def test_a_bad_wall_prior_is_one_clear_error(tmp_path, text):
+    bad = tmp_path / "prior.yaml"
+    bad.write_text(text)
+    with pytest.raises(InputError, match=str(bad)):
+        read_wall_prior(bad)
