@@ -110,7 +110,11 @@ class Intrinsics:
         return np.column_stack([self.fx * rays[:, 0] + self.cx, self.fy * rays[:, 1] + self.cy])
 
 
-MAX_PIXELS = 16384  # an image side (and a bound on K's entries): larger is no camera or beamer of this system
+MAX_PIXELS = 16384  # an image side: larger is no camera or beamer of this system
+# A poorly constrained fit's focal lengths and rational terms reach 1e5 and more (OpenCV writes them; a poor rig
+# is refused by the calibration's quality gate unless --accept-poor, not by its reader): matrices' entries are
+# only refused at absurd magnitudes; the image size above bounds what is allocated.
+MAX_ENTRY = 1e12
 _DISTORTION_MODEL = {4: "plumb_bob", 5: "plumb_bob", 8: "rational_polynomial"}
 
 
@@ -164,7 +168,7 @@ def read_camera_info(path: str | Path) -> Intrinsics:
         m = get(key)
         if not isinstance(m, dict) or "data" not in m:
             raise fail(source, key, m, "must have rows, cols and data", "fix the file or recalibrate")
-        data = float_array(source, f"{key}.data", m["data"], (None,), -MAX_PIXELS, MAX_PIXELS, max_rows=64,
+        data = float_array(source, f"{key}.data", m["data"], (None,), -MAX_ENTRY, MAX_ENTRY, max_rows=64,
                            hint="fix the file or recalibrate")
         r = integer(source, f"{key}.rows", m.get("rows", rows or 1), 1, 64)
         c = integer(source, f"{key}.cols", m.get("cols", cols or data.size), 1, 64)

@@ -50,12 +50,12 @@ def load_scan(path: str | Path) -> ScanData:
     with log:
         try:
             frames = log.frames()
-        except (sqlite3.DatabaseError, ValueError) as err:
+        except (sqlite3.DatabaseError, DamagedLogError, ValueError) as err:
             warnings.append(f"{path}: frames table unreadable ({err}); using sample positions as logged")
             frames = {}
         try:
             samples = log.samples()
-        except sqlite3.DatabaseError as err:
+        except (sqlite3.DatabaseError, DamagedLogError) as err:  # the reader names damaged pages DamagedLogError
             warnings.append(f"{path}: damaged samples table ({err}); reading pass by pass")
             samples = _samples_pass_by_pass(log, warnings)
         meta = dict(log.meta)
@@ -72,13 +72,13 @@ def load_scan(path: str | Path) -> ScanData:
 def _samples_pass_by_pass(log: ScanLog, warnings: list[str]) -> dict[str, NDArray]:
     try:
         pass_ids = [int(p) for p in log.passes()["pass_id"]]
-    except sqlite3.DatabaseError as err:
+    except (sqlite3.DatabaseError, DamagedLogError) as err:
         raise InputError(f"{log.path}: the scan log is damaged beyond reading ({err})") from None
     parts, bad = [], 0
     for pid in pass_ids:
         try:
             parts.append(log.samples([pid]))
-        except sqlite3.DatabaseError:
+        except (sqlite3.DatabaseError, DamagedLogError):
             bad += 1
     if bad:
         warnings.append(f"{log.path}: {bad} of {len(pass_ids)} passes unreadable and skipped")

@@ -36,6 +36,7 @@ import numpy as np
 import yaml
 
 from arproj.bench import BenchTable, cells, column, columns
+from scanner.channels import NAMES as CHANNEL_NAMES
 
 T = TypeVar("T")
 TARGET_S = 2.0       # every refusal within
@@ -453,7 +454,7 @@ def _wallpose_argv(fx: Fixture, rig: Path) -> list[str]:
 def rig_case(fx: Fixture, picker: Picker) -> Case:
     rig = _rig_copy(fx)
     doc = yaml.safe_load((rig / "rig.yaml").read_text())
-    data, what = mutate_document(doc, "yaml", picker, skip=("quality", "head.model", "head.joints"))
+    data, what = mutate_document(doc, "yaml", picker, skip=("made_by", "quality", "head.model", "head.joints"))
     (rig / "rig.yaml").write_bytes(data)
     return Case("rig file", what, rig / "rig.yaml", _wallpose_argv(fx, rig))
 
@@ -488,7 +489,7 @@ def objects_case(fx: Fixture, picker: Picker) -> Case:
         doc["objects"][0]["points_m"] = [[x + 5.0, y] for x, y in doc["objects"][0]["points_m"]]
         data, what = json.dumps(doc).encode(), "objects of another wall (5 m off this map)"
     else:
-        data, what = mutate_document(doc, "json", picker, skip=("frame", "units", "scanned_regions_m"))
+        data, what = mutate_document(doc, "json", picker, skip=("made_by", "frame", "units", "scanned_regions_m"))
     (folder / "objects.json").write_bytes(data)
     return Case("objects.json", what, folder / "objects.json", ["drill", str(folder), "--at", "0.1,0.1"])
 
@@ -518,16 +519,14 @@ def scan_log_case(fx: Fixture, picker: Picker) -> Case:
     for suffix in ("", "-wal", "-shm", ".lock"):
         Path(f"{bad}{suffix}").unlink(missing_ok=True)
     shutil.copyfile(fx.log, bad)
+    # Not "truncated": a log cut short is read pass by pass by design, its sound passes mapped and the rest left
+    # unknown with a warning (tests/mapping/test_pipeline.py::test_truncated_log_still_maps_what_is_sound).
     how = pick(picker, ("text in a number column", "non-JSON meta", "far off the wall", "wrong meta format",
-                        "bad covariance", "reading out of range", "truncated", "garbage header", "not a database"))
+                        "bad covariance", "reading out of range", "garbage header", "not a database"))
     what = how
-    if how in ("truncated", "garbage header", "not a database"):
+    if how in ("garbage header", "not a database"):
         data = bad.read_bytes()
-        if how == "truncated":
-            page = 4096
-            keep = picker.integer(1, max(1, len(data) // page // 2))
-            data, what = data[:keep * page], f"truncated to {keep} pages of {len(data) // page}"
-        elif how == "garbage header":
+        if how == "garbage header":
             at = picker.integer(0, 15)  # the magic string "SQLite format 3\0"
             data = data[:at] + bytes([data[at] ^ 0x20]) + data[at + 1:]
             what = f"header byte {at} changed"
@@ -540,7 +539,7 @@ def scan_log_case(fx: Fixture, picker: Picker) -> Case:
             n = db.execute("SELECT COUNT(*) FROM samples").fetchone()[0]
             seq = picker.integer(0, n - 1)
             if how == "text in a number column":
-                col = pick(picker, (*SAMPLE_POSITIONS, "inductive", "capacitive", "ac", "time_s"))
+                col = pick(picker, (*SAMPLE_POSITIONS, *CHANNEL_NAMES, "time_s"))
                 db.execute(f"UPDATE samples SET {col} = ? WHERE seq = ?", (pick(picker, ["abc", "1.0x", ""]), seq))
                 what = f"text in samples.{col} of sample {seq}"
             elif how == "non-JSON meta":
@@ -554,7 +553,7 @@ def scan_log_case(fx: Fixture, picker: Picker) -> Case:
                 db.execute(f"UPDATE samples SET {col} = ? WHERE seq = ?", (value, seq))
                 what = f"samples.{col} = {value:g} at sample {seq}"
             elif how == "reading out of range":
-                col = pick(picker, ("inductive", "capacitive", "ac"))
+                col = pick(picker, CHANNEL_NAMES)
                 db.execute(f"UPDATE samples SET {col} = ? WHERE seq = ?", (pick(picker, [1e6, -1e9, math.inf]), seq))
                 what = f"samples.{col} out of range at sample {seq}"
             elif how == "wrong meta format":
