@@ -13,6 +13,7 @@ or a new host) GRBL is in alarm until homed and the scanner's and the laser's bu
 from __future__ import annotations
 
 import math
+from abc import abstractmethod
 
 import numpy as np
 
@@ -238,9 +239,9 @@ class BufferedLaserSim(TaggedLineSim):
     def heads(self) -> tuple[str, ...]:
         return HEADS
 
+    @abstractmethod
     def take(self, head: str, tag: int) -> tuple[np.ndarray, float, float]:
         """One turn of `head`: (ranges (n,) metres, NaN: no return; angle of ray 0, the step; radians)."""
-        raise NotImplementedError
 
     def dispatch(self, tag: str, command: str, args: list[str]) -> list[str]:
         if command == "ID?":
