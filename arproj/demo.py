@@ -568,6 +568,9 @@ def run_demo(options: DemoOptions) -> DemoContext:
 
         Rig.load(options.rig)  # a bad rig folder is an input error now, not a failed stage later
     _check_writable(options.out)
+    from render.gl import create_context
+
+    create_context().release()  # the site's cameras and the projection need GL: say so before the scan, not after
     ctx = DemoContext(options, wall, wall_path)
     finished = _load_state(ctx) if options.resume else set()
     if not options.resume:

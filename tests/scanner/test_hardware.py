@@ -33,16 +33,19 @@ def test_a_thousand_seeded_faults_lose_no_sample(small_wall):
     world, robot = simulated_site(small_wall, sensor, drives, 11)
     reference = run_scan(small_wall, DirectBackend(world), robot, plan_kind="dense", sensor=sensor, drives=drives)
     world, robot = simulated_site(small_wall, sensor, drives, 11)
-    faults = FaultConfig(rate=0.03, seed=5, down_s=0.02, weights={
-        "garbage": 0.3, "junk": 0.25, "truncate": 0.25, "drop": 0.1, "disconnect": 0.5,
-        "vanish": 0.1, "stream": 0.05, "flood": 0.05})  # the hostile ones too (tests/devices/test_soak.py)
+    # every kind, the hostile ones too (tests/devices/test_soak.py), but few of the slow ones: a reconnect costs
+    # pyserial's 0.3 s close, a device that keeps talking the request's whole bound (about 1 s); the cheap kinds
+    # (a timeout of 0.03 s at most) make up the thousand
+    faults = FaultConfig(rate=0.016, seed=5, down_s=0.02, weights={
+        "garbage": 0.3, "junk": 0.25, "truncate": 0.25, "drop": 0.1, "disconnect": 0.3,
+        "vanish": 0.3, "stream": 0.0025, "flood": 0.0025})
     with simulated_devices(world, robot, faults, timeout_s=0.03, max_pass_attempts=30) as devices:
         result = run_scan(small_wall, devices.backend, devices.robot, plan_kind="dense", sensor=sensor,
                           drives=drives)
         servers = devices.servers.servers
         injected = servers["drives"].faults.counts + servers["scanner"].faults.counts
         reconnects = servers["drives"].connections + servers["scanner"].connections - 2
-    assert sum(injected.values()) >= 1000
+    assert sum(injected.values()) >= 1000, injected
     assert all(injected[k] > 0 for k in ("garbage", "junk", "truncate", "drop", "disconnect", "vanish", "stream",
                                          "flood")), injected
     assert reconnects >= 3 and devices.backend.pass_restarts >= 3

@@ -61,19 +61,23 @@ def references(tmp_path_factory: pytest.TempPathFactory) -> dict:
     log = write_log(simulate_scan(load_wall(shipped_walls()["small_test_wall"]), seed=2), root / "scan.sqlite")
     done = CliRunner().invoke(app, ["map", str(log), "--out", str(root / "old"), "--resolution", "4"])
     assert done.exit_code == 0, done.output
-    proc = _map(log, root / "new")
-    started = _until_writing(proc, root / "new")
+    # the new map is written where the test's killed runs write: their command, which the files record, is its
+    out = root / "work" / "map"
+    out.parent.mkdir()
+    proc = _map(log, out)
+    started = _until_writing(proc, out)
     assert proc.wait() == 0
     window = time.monotonic() - started
-    return {"log": log, "old": root / "old", "new": root / "new", "window_s": window}
+    out.rename(root / "new")
+    return {"log": log, "old": root / "old", "new": root / "new", "out": out, "window_s": window}
 
 
-def test_sigkill_while_writing_leaves_the_old_or_the_new_map_whole(references: dict, tmp_path: Path) -> None:
+def test_sigkill_while_writing_leaves_the_old_or_the_new_map_whole(references: dict) -> None:
     old, new = _hashes(references["old"]), _hashes(references["new"])
     differ = [k for k in old if old[k] != new.get(k)]
     assert old.keys() == new.keys() and len(differ) >= 3, differ  # a mix would show
     delays = np.random.default_rng(SEED).uniform(0.0, 1.1 * references["window_s"], KILLS)
-    out = tmp_path / "map"
+    out = references["out"]
     outcomes = []
     for delay in delays:
         shutil.copytree(references["old"], out)
@@ -90,7 +94,7 @@ def test_sigkill_while_writing_leaves_the_old_or_the_new_map_whole(references: d
                 is not None, f"{png.name} truncated"
         outcomes.append("new" if state == new else "old")
         shutil.rmtree(out)
-        for leftover in tmp_path.glob(".map.*"):  # a killed writer's temporary folder (the next run removes it)
+        for leftover in out.parent.glob(".map.*"):  # a killed writer's temporary folder (the next run removes it)
             shutil.rmtree(leftover)
     print(f"SIGKILL {references['window_s']:.2f} s writing window, delays {np.round(delays, 3).tolist()}: {outcomes}")
     assert "old" in outcomes  # kills came while it wrote, not only after the swap

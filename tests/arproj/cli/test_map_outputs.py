@@ -15,6 +15,7 @@ import pytest
 from typer.testing import CliRunner
 
 from arproj.cli import app
+from geometry import provenance
 from mapping.simscan import simulate_scan, write_log
 from scanner.wall import load_wall, shipped_walls
 
@@ -86,15 +87,22 @@ def test_a_failure_while_writing_keeps_the_old_map(maps: dict[str, Path], tmp_pa
 
 
 @pytest.mark.skipif(not EXE.exists(), reason="the arproj console script is not installed here")
-def test_kill_9_at_any_moment_of_writing_leaves_the_old_or_the_new_map(maps: dict[str, Path],
-                                                                      tmp_path: Path) -> None:
-    old, new = _content(maps["old"]), _content(maps["new"])
+def test_kill_9_at_any_moment_of_writing_leaves_the_old_or_the_new_map(maps: dict[str, Path], tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     out = tmp_path / "map"
+    command = ["map", str(maps["log"]), "--out", str(out), "--resolution", "6"]
+    # the files record the command that made them: the new map made here as the killed processes make it
+    monkeypatch.setattr(provenance, "_command", [provenance.PROGRAM, *command])
+    reference = maps["log"].parent / "kill-new"  # beside the log: tmp_path holds only the map and its siblings
+    assert CliRunner().invoke(app, [*command[:3], str(reference), *command[4:]]).exit_code == 0
+    old, new = _content(maps["old"]), _content(reference)
     outcomes = []
-    for written in range(len(new) + 1):  # kill once the new folder holds 0, 1, … all files
+    # kill once the new folder holds none, one, half, all but one and all of the files (each kill is a process
+    # of seconds; tests/arproj/cli/test_map_kill.py kills at random moments inside files' writes)
+    for written in sorted({0, 1, len(new) // 2, len(new) - 1, len(new)}):
         _copy(maps["old"], out)
-        proc = subprocess.Popen([str(EXE), "map", str(maps["log"]), "--out", str(out), "--resolution", "6"],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT)
+        proc = subprocess.Popen([str(EXE), *command], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                cwd=ROOT)
         tmp = tmp_path / f".map.new-{proc.pid}"
         while proc.poll() is None and not (tmp.is_dir() and len(list(tmp.iterdir())) >= written):
             time.sleep(0.002)
@@ -103,9 +111,11 @@ def test_kill_9_at_any_moment_of_writing_leaves_the_old_or_the_new_map(maps: dic
         state = _content(out)
         assert state in (old, new), f"killed with {written} files written: a mixed folder {sorted(state)}"
         outcomes.append("new" if state == new else "old")
-        done = CliRunner().invoke(app, ["map", str(maps["log"]), "--out", str(out), "--resolution", "6"])
-        assert done.exit_code == 0, done.output  # the next run clears what the killed one left
-        assert _content(out) == new and [p.name for p in tmp_path.iterdir()] == ["map"]
-        shutil.rmtree(out)
+        if written < len(new):
+            shutil.rmtree(out)
+    # one run after all the kills clears what every killed one left (a process per kill costs seconds)
+    done = CliRunner().invoke(app, command)
+    assert done.exit_code == 0, done.output
+    assert _content(out) == new and [p.name for p in tmp_path.iterdir()] == ["map"]
     print(f"kill -9 outcomes: {outcomes}")
     assert "old" in outcomes  # the kills came while writing, not only after the swap
