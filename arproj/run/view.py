@@ -9,7 +9,7 @@ Entities (2-D, wall metres, x along the wall, y up):
                             the display as 0..255), nothing where no sample fell
   wall/detections/<channel> the peaks each pass found along its course (what the adaptive plan traces)
   wall/robot                the robot's localised pose at each frame (the drive frame's origin and axes)
-  wall/scanner              the scanner on the drives, along each pass
+  wall/scanner              the scanner on the drives, where each pass starts and ends
 Rerun's 2-D view draws y downwards: every position is sent as (x, top − y), so the wall stands upright. The
 grids are sent at most every IMAGE_PERIOD_S of wall-clock time and once at the end, so that a large wall's
 images cost the scan little. `FILE.rrd` saves the recording (`rerun FILE.rrd` opens it); `live` spawns a viewer.
@@ -24,16 +24,17 @@ from typing import Any
 import numpy as np
 import rerun as rr
 from numpy.typing import NDArray
+from scipy import ndimage
 
 from geometry.errors import InputError
-from mapping.evidence import DEFAULT_COVERAGE_RADIUS_M, SAFETY_CHANNELS, covered_cells
+from mapping.evidence import DEFAULT_COVERAGE_RADIUS_M, SAFETY_CHANNELS
 from mapping.grid import GridInfo
-from mapping.ros.record import TF_PERIOD_S
 from scanner.channels import NAMES as CHANNEL_NAMES
 from scanner.peaks import detect_peaks
 from scanner.sim.world import FrameReport
 
 IMAGE_PERIOD_S = 2.0
+DETECTION_STEP_M = 0.002  # the view's peak search resamples a pass this finely (a quarter of the planner's work)
 LIVE = "live"
 ENTITIES = ("wall/outline", "wall/samples", "wall/coverage", *(f"wall/map/{c}" for c in CHANNEL_NAMES),
             *(f"wall/detections/{c}" for c in CHANNEL_NAMES), "wall/robot", "wall/scanner")
@@ -65,7 +66,6 @@ class ScanView:
         self.top = self.info.origin_y + self.info.height * self.info.resolution
         self.sums = {c: np.zeros(self.info.shape) for c in CHANNEL_NAMES}
         self.counts = {c: np.zeros(self.info.shape) for c in CHANNEL_NAMES}
-        self.covered = {c: np.zeros(self.info.shape, bool) for c in SAFETY_CHANNELS}
         self.passes = 0
         self._sent = 0.0
         corners = np.array([[0, 0], [wall_width_m, 0], [wall_width_m, wall_height_m], [0, wall_height_m], [0, 0]])
@@ -109,13 +109,8 @@ class ScanView:
             ok = inside & np.isfinite(values)
             np.add.at(self.sums[channel], (rows[ok], cols[ok]), values[ok])
             np.add.at(self.counts[channel], (rows[ok], cols[ok]), 1.0)
-        for channel in self.covered:
-            finite = np.isfinite(np.asarray(samples.get(channel, np.full(len(xy), np.nan)), dtype=np.float64))
-            if finite.any():
-                self.covered[channel] |= covered_cells(self.info, xy[finite], DEFAULT_COVERAGE_RADIUS_M[channel])
         self._detections(row, samples, xy)
-        keep = np.unique(np.r_[np.searchsorted(times, np.arange(times[0], times[-1], TF_PERIOD_S)), len(times) - 1])
-        for i in keep:
+        for i in (0, len(times) - 1):  # where the scanner starts and ends the pass
             self.rec.set_time("scan_time", duration=float(times[i]))
             self.rec.log("wall/scanner", rr.Points2D(self._screen(xy[i]), radii=0.01, colors=[(0, 0, 0)]))
         if time.monotonic() - self._sent >= IMAGE_PERIOD_S:
@@ -131,7 +126,7 @@ class ScanView:
             values = np.asarray(samples.get(channel, ()), dtype=np.float64)
             if len(values) != len(coord) or not np.isfinite(values).all():
                 continue
-            peaks = detect_peaks(coord, values)
+            peaks = detect_peaks(coord, values, grid_step_m=DETECTION_STEP_M)
             if not peaks:
                 continue
             at = np.array([p.position for p in peaks])
@@ -140,11 +135,19 @@ class ScanView:
             self.rec.log(f"wall/detections/{channel}", rr.Points2D(self._screen(found), radii=0.006,
                                                                   colors=[_DETECTION_COLOUR[channel]]))
 
+    def _covered(self, channel: str) -> NDArray[np.bool_]:
+        """The cells within the channel's coverage radius of a cell a sample fell in (the view's picture of
+        coverage, a cell coarser than the map's, mapping.evidence.Coverage, which the drill check reads)."""
+        radius = DEFAULT_COVERAGE_RADIUS_M[channel] / self.info.resolution
+        r = int(np.ceil(radius))
+        dy, dx = np.mgrid[-r:r + 1, -r:r + 1]
+        return ndimage.binary_dilation(self.counts[channel] > 0, structure=np.hypot(dx, dy) <= radius + 0.5)
+
     def images(self) -> None:
         """Send the grids as they stand (flipped: an image's first row is the wall's top)."""
         self._sent = time.monotonic()
-        both = np.all([self.covered[c] for c in self.covered], axis=0)
-        some = np.any([self.covered[c] for c in self.covered], axis=0)
+        covered = [self._covered(c) for c in SAFETY_CHANNELS]
+        both, some = np.all(covered, axis=0), np.any(covered, axis=0)
         cover = np.zeros((*self.info.shape, 4), np.uint8)
         cover[some] = (240, 170, 0, 120)
         cover[both] = (0, 170, 60, 120)

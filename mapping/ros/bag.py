@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
+import struct
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -72,6 +73,10 @@ def quaternion(R: NDArray[np.float64]) -> tuple[float, float, float, float]:
     return (-q[0], -q[1], -q[2], -q[3]) if q[3] < 0 else q
 
 
+_STRUCT = {code: struct.Struct(f"<{fmt}") for code, fmt in
+           (("i1", "b"), ("u1", "B"), ("i4", "i"), ("u4", "I"), ("f4", "f"), ("f8", "d"))}
+
+
 class CdrBuffer:
     """Little-endian CDR of one message, field by field (alignment counted after the encapsulation header, as
     CDR has it); arrays of numbers go in at once from numpy."""
@@ -83,9 +88,14 @@ class CdrBuffer:
         self.out += b"\x00" * (-(len(self.out) - 4) % size)
 
     def number(self, dtype: str, value: float) -> CdrBuffer:
-        d = np.dtype(dtype).newbyteorder("<")
-        self._align(d.itemsize)
-        self.out += np.asarray(value, d).tobytes()
+        fmt = _STRUCT[dtype]
+        self._align(fmt.size)
+        self.out += fmt.pack(value)
+        return self
+
+    def doubles(self, *values: float) -> CdrBuffer:
+        self._align(8)
+        self.out += struct.pack(f"<{len(values)}d", *values)
         return self
 
     def string(self, text: str) -> CdrBuffer:
@@ -117,8 +127,8 @@ def tf_message(transforms: list[tuple[NDArray[np.float64], str, str, int]]) -> b
     for T, parent, child, t_ns in transforms:
         T = np.asarray(T, dtype=np.float64)
         cdr.header(int(t_ns), parent).string(child)
-        for value in (*T[:3, 3], *quaternion(T[:3, :3])):
-            cdr.number("f8", float(value))
+        cdr.doubles(*T[:3, 3].tolist(), *quaternion(T[:3, :3]))
+
     return cdr.bytes()
 
 

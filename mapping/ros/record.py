@@ -45,7 +45,7 @@ LASER_TOPICS = {"H": ("/laser", "laser"), "V": ("/laser/vertical", "laser_vertic
 FREE, OCCUPIED, UNKNOWN = 0, 100, -1
 _GRID_VALUE = {drill.VERDICT_CODES[drill.SAFE]: FREE, drill.VERDICT_CODES[drill.KEEP_AWAY]: OCCUPIED,
                drill.VERDICT_CODES[drill.UNKNOWN]: UNKNOWN}
-TF_PERIOD_S = 0.25  # the scanner's pose along a pass, this often in scan time (RViz draws it moving)
+TF_PERIOD_S = 0.5  # the scanner's pose along a pass, this often in scan time (RViz draws it moving)
 NS = 1_000_000_000
 PASS_ARRAYS = ("time_s", "drive_u_m", "drive_v_m", "x_m", "y_m", "inductive", "capacitive", "ac")
 AXIS_CODES = {"x": 0, "y": 1}  # as the log codes a pass's axis; 2: a following pass along both drives
