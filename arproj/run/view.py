@@ -3,16 +3,17 @@ happens, on the scan's own clock (timeline `scan_time`, seconds) and by pass (ti
 
 Entities (2-D, wall metres, x along the wall, y up):
   wall/outline              the wall's rectangle
-  wall/samples              every pass's samples, coloured by the inductive reading
+  wall/samples/<batch>      every pass's samples, coloured by the inductive reading (a batch: those sent at once)
   wall/coverage             the cells the safety channels covered so far (both: green, one: amber)
   wall/map/<channel>        the growing map of each channel: the mean reading in each cell so far (0..1 of
                             the display as 0..255), nothing where no sample fell
-  wall/detections/<channel> the peaks each pass found along its course (what the adaptive plan traces)
+  wall/detections/<channel> the peaks the passes found along their course so far (what the adaptive plan traces)
   wall/robot                the robot's localised pose at each frame (the drive frame's origin and axes)
-  wall/scanner              the scanner on the drives, where each pass starts and ends
-Rerun's 2-D view draws y downwards: every position is sent as (x, top − y), so the wall stands upright. The
-grids are sent at most every IMAGE_PERIOD_S of wall-clock time and once at the end, so that a large wall's
-images cost the scan little. `FILE.rrd` saves the recording (`rerun FILE.rrd` opens it); `live` spawns a viewer.
+  wall/scanner              the scanner on the drives, where each pass ends
+Rerun's 2-D view draws y downwards: every position is sent as (x, top − y), so the wall stands upright.
+Samples, detections and grids are sent every IMAGE_PERIOD_S of wall-clock time and at the end, so that a large
+wall costs the scan little; robot and scanner poses at once. `FILE.rrd` saves the recording (`rerun FILE.rrd`
+opens it); `live` spawns a viewer.
 """
 
 from __future__ import annotations
@@ -67,7 +68,10 @@ class ScanView:
         self.sums = {c: np.zeros(self.info.shape) for c in CHANNEL_NAMES}
         self.counts = {c: np.zeros(self.info.shape) for c in CHANNEL_NAMES}
         self.passes = 0
-        self._sent = 0.0
+        self._pending: list[tuple[NDArray[np.float64], NDArray[np.uint8]]] = []
+        self._batches = 0
+        self.found: dict[str, list[NDArray[np.float64]]] = {c: [] for c in CHANNEL_NAMES}
+        self._sent = time.monotonic()
         corners = np.array([[0, 0], [wall_width_m, 0], [wall_width_m, wall_height_m], [0, wall_height_m], [0, 0]])
         self.rec.log("wall/outline", rr.LineStrips2D([self._screen(corners)]), static=True)
         scale = rr.Transform3D(scale=[self.info.resolution, self.info.resolution, 1.0],
@@ -102,7 +106,7 @@ class ScanView:
         ind = np.nan_to_num(np.asarray(samples.get("inductive", np.zeros(len(xy))), dtype=np.float64))
         level = np.clip(ind, 0.0, 1.0)
         colours = np.column_stack([255 * level, 80 + 100 * (1 - level), 255 * (1 - level)]).astype(np.uint8)
-        self.rec.log("wall/samples", rr.Points2D(self._screen(xy), colors=colours, radii=0.0015))
+        self._pending.append((self._screen(xy), colours))
         rows, cols, inside = self.info.cell_of(xy)
         for channel in CHANNEL_NAMES:
             values = np.asarray(samples.get(channel, np.full(len(xy), np.nan)), dtype=np.float64)
@@ -110,9 +114,8 @@ class ScanView:
             np.add.at(self.sums[channel], (rows[ok], cols[ok]), values[ok])
             np.add.at(self.counts[channel], (rows[ok], cols[ok]), 1.0)
         self._detections(row, samples, xy)
-        for i in (0, len(times) - 1):  # where the scanner starts and ends the pass
-            self.rec.set_time("scan_time", duration=float(times[i]))
-            self.rec.log("wall/scanner", rr.Points2D(self._screen(xy[i]), radii=0.01, colors=[(0, 0, 0)]))
+        self.rec.set_time("scan_time", duration=float(times[-1]))  # where the scanner ends the pass
+        self.rec.log("wall/scanner", rr.Points2D(self._screen(xy[-1]), radii=0.01, colors=[(0, 0, 0)]))
         if time.monotonic() - self._sent >= IMAGE_PERIOD_S:
             self.images()
 
@@ -132,8 +135,7 @@ class ScanView:
             at = np.array([p.position for p in peaks])
             found = np.column_stack([np.interp(at, coord[order], xy[order, 0]),
                                      np.interp(at, coord[order], xy[order, 1])])
-            self.rec.log(f"wall/detections/{channel}", rr.Points2D(self._screen(found), radii=0.006,
-                                                                  colors=[_DETECTION_COLOUR[channel]]))
+            self.found[channel].append(self._screen(found))
 
     def _covered(self, channel: str) -> NDArray[np.bool_]:
         """The cells within the channel's coverage radius of a cell a sample fell in (the view's picture of
@@ -144,8 +146,19 @@ class ScanView:
         return ndimage.binary_dilation(self.counts[channel] > 0, structure=np.hypot(dx, dy) <= radius + 0.5)
 
     def images(self) -> None:
-        """Send the grids as they stand (flipped: an image's first row is the wall's top)."""
+        """Send what came since the last time: the samples (one entity per batch, so that every sample stays in
+        view), every detection so far, the grids as they stand (flipped: an image's first row is the wall's
+        top). Batched, because each call to Rerun costs about a millisecond whatever it carries."""
         self._sent = time.monotonic()
+        if self._pending:
+            xy, colours = (np.concatenate(parts) for parts in zip(*self._pending, strict=True))
+            self.rec.log(f"wall/samples/{self._batches}", rr.Points2D(xy, colors=colours, radii=0.0015))
+            self._batches += 1
+            self._pending = []
+        for channel, found in self.found.items():
+            if found:
+                self.rec.log(f"wall/detections/{channel}", rr.Points2D(np.concatenate(found), radii=0.006,
+                                                                      colors=[_DETECTION_COLOUR[channel]]))
         covered = [self._covered(c) for c in SAFETY_CHANNELS]
         both, some = np.all(covered, axis=0), np.any(covered, axis=0)
         cover = np.zeros((*self.info.shape, 4), np.uint8)

@@ -190,7 +190,8 @@ def test_the_rerun_recording_holds_every_entity(scanned: Path) -> None:
     from rerun.chunk import RrdReader
 
     paths = set(RrdReader(scanned / "scan.rrd").store().schema().entity_paths())
-    assert {f"/{e}" for e in ENTITIES} <= paths
+    for entity in ENTITIES:  # wall/samples holds one child per batch sent
+        assert f"/{entity}" in paths or any(p.startswith(f"/{entity}/") for p in paths), entity
 
 
 @pytest.mark.parametrize("args, message", [
