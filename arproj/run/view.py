@@ -9,11 +9,11 @@ Entities (2-D, wall metres, x along the wall, y up):
                             the display as 0..255), nothing where no sample fell
   wall/detections/<channel> the peaks the passes found along their course so far (what the adaptive plan traces)
   wall/robot                the robot's localised pose at each frame (the drive frame's origin and axes)
-  wall/scanner              the scanner on the drives, where each pass ends
+  wall/scanner              the scanner on the drives: where each pass sent since ended, the last one largest
 Rerun's 2-D view draws y downwards: every position is sent as (x, top − y), so the wall stands upright.
 Samples, detections and grids are sent every IMAGE_PERIOD_S of wall-clock time and at the end, so that a large
-wall costs the scan little; robot and scanner poses at once. `FILE.rrd` saves the recording (`rerun FILE.rrd`
-opens it); `live` spawns a viewer.
+wall costs the scan little (a call to Rerun costs about a millisecond); the robot's pose at once. `FILE.rrd`
+saves the recording (`rerun FILE.rrd` opens it); `live` spawns a viewer.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from scanner.peaks import detect_peaks
 from scanner.sim.world import FrameReport
 
 IMAGE_PERIOD_S = 2.0
-DETECTION_STEP_M = 0.002  # the view's peak search resamples a pass this finely (a quarter of the planner's work)
+DETECTION_STEP_M = 0.004  # the view's peak search resamples a pass this finely (an eighth of the planner's work)
 LIVE = "live"
 ENTITIES = ("wall/outline", "wall/samples", "wall/coverage", *(f"wall/map/{c}" for c in CHANNEL_NAMES),
             *(f"wall/detections/{c}" for c in CHANNEL_NAMES), "wall/robot", "wall/scanner")
@@ -70,6 +70,7 @@ class ScanView:
         self.passes = 0
         self._pending: list[tuple[NDArray[np.float64], NDArray[np.uint8]]] = []
         self._batches = 0
+        self._ends: list[NDArray[np.float64]] = []
         self.found: dict[str, list[NDArray[np.float64]]] = {c: [] for c in CHANNEL_NAMES}
         self._sent = time.monotonic()
         corners = np.array([[0, 0], [wall_width_m, 0], [wall_width_m, wall_height_m], [0, wall_height_m], [0, 0]])
@@ -114,8 +115,7 @@ class ScanView:
             np.add.at(self.sums[channel], (rows[ok], cols[ok]), values[ok])
             np.add.at(self.counts[channel], (rows[ok], cols[ok]), 1.0)
         self._detections(row, samples, xy)
-        self.rec.set_time("scan_time", duration=float(times[-1]))  # where the scanner ends the pass
-        self.rec.log("wall/scanner", rr.Points2D(self._screen(xy[-1]), radii=0.01, colors=[(0, 0, 0)]))
+        self._ends.append(self._screen(xy[-1]))
         if time.monotonic() - self._sent >= IMAGE_PERIOD_S:
             self.images()
 
@@ -155,6 +155,11 @@ class ScanView:
             self.rec.log(f"wall/samples/{self._batches}", rr.Points2D(xy, colors=colours, radii=0.0015))
             self._batches += 1
             self._pending = []
+        if self._ends:  # where the scanner ended each pass since, the last one largest
+            ends = np.concatenate(self._ends)
+            self.rec.log("wall/scanner", rr.Points2D(ends, radii=[0.004] * (len(ends) - 1) + [0.01],
+                                                     colors=[(0, 0, 0)]))
+            self._ends = []
         for channel, found in self.found.items():
             if found:
                 self.rec.log(f"wall/detections/{channel}", rr.Points2D(np.concatenate(found), radii=0.006,

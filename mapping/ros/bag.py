@@ -156,7 +156,7 @@ class RosBag:
     def __init__(self, path: str | Path) -> None:
         self.path = check_path(path)
         self._file = open(self.path, "wb")  # noqa: SIM115 (closed by close())
-        self._writer = Writer(self._file, compression=CompressionType.ZSTD)
+        self._writer = Writer(self._file, compression=CompressionType.LZ4)  # zstd: 2/3 the size, 1.4 x the time
         self._writer.start(profile="ros2", library=f"arproj, mcap-ros2-support {mcap_ros2_version}")
         self._schemas: dict[str, int] = {}
         self._encoders: dict[str, EncoderFunction] = {}
