@@ -185,6 +185,7 @@ class DeviceRobot:
             assert self.operator is not None
             self.operator(frame)
         fix = room = None
+        turns = None
         if self.laser is not None:
             laser = self.laser
 
@@ -199,10 +200,11 @@ class DeviceRobot:
                     raise DeviceError(f"frame {frame.frame_id}: the laser cannot fix the robot ({err})",
                                       "clear the laser's view of the side walls and the floor, then resume") from None
             room = room_from_scans(scans[0], scans[1], seed=frame.frame_id)
+            turns = dict(zip(HEADS, scans, strict=True))
         if self.base is None:
             assert fix is not None
             estimate, cov = pose_from_fix(fix)
-        return FrameReport(commanded, estimate, cov, true, fix, room)
+        return FrameReport(commanded, estimate, cov, true, fix, room, turns)
 
     def close(self) -> None:
         for link in (self.laser_link, self.base_link):

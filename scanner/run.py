@@ -50,6 +50,14 @@ class Backend(Protocol):
     def close(self) -> None: ...
 
 
+class ScanWatcher(Protocol):
+    """Who sees the scan as it happens (a recording, a live view): every frame as the robot reports it, every
+    pass with its samples, resumed ones included, in the order the scan makes them."""
+
+    def frame(self, row: dict[str, Any], report: FrameReport) -> None: ...
+    def scanned(self, row: dict[str, Any], samples: Samples) -> None: ...
+
+
 class DirectBackend:
     """The simulated site evaluated in-process (no serial transport): fast, for benchmarks."""
 
@@ -115,11 +123,11 @@ def check_setup(sensor: SensorConfig, drives: DriveConfig) -> None:
 def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dense",
              plan_options: dict[str, Any] | None = None, sensor: SensorConfig | None = None,
              drives: DriveConfig | None = None, log: ScanLog | None = None, progress: ProgressFn | None = None,
-             crash_hook: Callable[[int], None] | None = None) -> ScanResult:
+             crash_hook: Callable[[int], None] | None = None, watch: ScanWatcher | None = None) -> ScanResult:
     """Execute a plan; record every pass in `log` (if given; resuming from what it already holds).
 
     robot: has go_to(FrameTarget) -> FrameReport. crash_hook(pass_id) is called just before a pass would be
-    committed (tests raise ScanCrashError there to simulate a crash mid-batch).
+    committed (tests raise ScanCrashError there to simulate a crash mid-batch). watch sees every frame and pass.
     """
     sensor = sensor or SensorConfig()
     drives = drives or DriveConfig()
@@ -170,6 +178,8 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
             if log is not None:
                 log.append_frame(row)
         frame_rows.append(row)
+        if watch is not None:
+            watch.frame(row, report)
         if report.room is not None:
             rooms.append(report.room)
         backend.place_robot(report)
@@ -201,6 +211,8 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
                     if log is not None:
                         log.append_pass(spec.row(pass_id, t, t + duration), samples)
                     measured += 1
+                if watch is not None:
+                    watch.scanned(spec.row(pass_id, t, t + duration), samples)
                 t += duration
                 uv_now = np.asarray(spec.end_uv, dtype=np.float64)
                 results[pass_id] = samples

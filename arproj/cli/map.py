@@ -27,6 +27,9 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                                  "whose merged surface becomes wall.glb's mesh."),
         wall: Path | None = typer.Option(None, "--wall", help="Wall file with the truth (simulation): print "
                                          "recall, precision and position error against it."),
+        record: Path | None = typer.Option(None, "--record", help="Also write the scan and this map as ROS 2 "
+                                           "messages into this .mcap file (tf, passes, /map and one grid per "
+                                           "channel, /objects), a rosbag2 metadata.yaml beside it."),
     ) -> None:
         """Build the in-wall map from a scan log: occupancy grids, stitched frames, classified objects, and
         the exports the projection session and CAD read."""
@@ -41,6 +44,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         folder = OutputFolder(out, exports.file_names() | {RANGE_IMAGES_FILE}, "map folder",
                               keep={RANGE_IMAGES_FILE})
         folder.check()
+        if record is not None:
+            from mapping.ros.bag import check_path
+
+            check_path(record)
         truth = None
         if wall is not None:
             from scanner.wall import load_wall
@@ -73,6 +80,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                     bar.update(task, description=f"writing {name}")
                     written.append(out / step().name)
                     bar.advance(task)
+        if record is not None:
+            from mapping.ros.record import record_map
+
+            assert result.coverage is not None  # build_map always makes it
+            written.append(record_map(record, data, result.mapped_objects(), result.coverage))
         for note in result.notes:
             console.print(note, highlight=False)
         for w in result.warnings:

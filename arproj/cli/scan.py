@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from arproj.run.scan import DeviceUrls, ScanSettings
     from scanner.log import ScanLog
     from scanner.plan import FrameTarget
-    from scanner.run import ScanResult
+    from scanner.run import ScanResult, ScanWatcher
     from scanner.wall import Wall
 
 
@@ -38,7 +38,8 @@ def _ask_operator(frame: FrameTarget) -> None:
 
 
 def _scan_into(scan_log: ScanLog, the_wall: Wall, settings: ScanSettings, fast: bool, faults: float,
-               urls: DeviceUrls | None, virtual_clock: bool, device_timeout: float) -> ScanResult:
+               urls: DeviceUrls | None, virtual_clock: bool, device_timeout: float,
+               watch: ScanWatcher | None = None) -> ScanResult:
     """Scan into an open log (the simulated site, or the devices at urls), print what was done, return it."""
     from arproj.console import console, progress_bar
     from arproj.run.scan import scan_on_devices, scan_simulated
@@ -46,7 +47,7 @@ def _scan_into(scan_log: ScanLog, the_wall: Wall, settings: ScanSettings, fast: 
     settings.serial, settings.faults = not fast, faults
     if urls is not None and urls.base is None:  # an operator at the terminal: no progress bar over the prompts
         scan = scan_on_devices(the_wall, settings, urls, scan_log, operator=_ask_operator,
-                               realtime=not virtual_clock, timeout_s=device_timeout)
+                               realtime=not virtual_clock, timeout_s=device_timeout, watch=watch)
     else:
         with progress_bar() as bar:
             task = bar.add_task("scanning", total=1.0)
@@ -55,9 +56,9 @@ def _scan_into(scan_log: ScanLog, the_wall: Wall, settings: ScanSettings, fast: 
                 bar.update(task, completed=t, total=total,
                            description=f"scan {_fmt_duration(t)}/~{_fmt_duration(total)}")
 
-            scan = scan_simulated(the_wall, settings, scan_log, progress) if urls is None else \
+            scan = scan_simulated(the_wall, settings, scan_log, progress, watch) if urls is None else \
                 scan_on_devices(the_wall, settings, urls, scan_log, progress, realtime=not virtual_clock,
-                                timeout_s=device_timeout)
+                                timeout_s=device_timeout, watch=watch)
     result = scan.result
     if urls is not None:
         console.print(f"device faults recovered: {scan.faults_recovered}")
@@ -132,6 +133,12 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                      "wall file's name without .yaml); an entry of that key is replaced."),
         site_map: Path = typer.Option(None, "--site-map", help="The map folder the site file names (default: "
                                       "map/ beside the site file, where `arproj map LOG --out DIR` writes)."),
+        record: Path = typer.Option(None, "--record", help="Also write the scan as ROS 2 messages into this "
+                                    ".mcap file (tf, every pass, the lasers' turns), a rosbag2 metadata.yaml "
+                                    "beside it: `ros2 bag info`, RViz, Foxglove open the folder."),
+        view: str = typer.Option(None, "--view", help="Show the scan live in a Rerun viewer (samples, coverage, "
+                                 "the growing map, finds, robot and drive poses): `--view live` spawns the "
+                                 "viewer, `--view FILE.rrd` saves the recording instead."),
     ) -> None:
         """Scan a wall: frames, passes and every sample go to a SQLite log, batch by batch (kill -9 safe)."""
         from scanner.log import WriterLock
@@ -158,6 +165,9 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             if not 0.01 <= device_timeout <= 60:
                 raise InputError(f"--device-timeout = {device_timeout:g} s: must lie between 0.01 and 60")
             urls = DeviceUrls(drives, scanner_url, laser, base)
+        from arproj.run.watch import check_targets
+
+        check_targets(record, view)
         if site is not None and no_site:
             raise InputError("give --site FILE or --no-site, not both")
         if site is not None and urls is not None and urls.laser is None:
@@ -206,8 +216,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             replacing = overwrite and log.exists()
             scan_log = new_scan_log(log, the_wall, str(wall), settings, overwrite=overwrite, simulated=urls is None)
             console.print(f"{log}: {'replaced by a new' if replacing else 'new'} scan log", highlight=False)
-        with scan_log:
-            result = _scan_into(scan_log, the_wall, settings, fast, faults, urls, virtual_clock, device_timeout)
+        from arproj.run.watch import open_watchers
+
+        with scan_log, open_watchers(scan_log.meta, record, view) as watch:
+            result = _scan_into(scan_log, the_wall, settings, fast, faults, urls, virtual_clock, device_timeout,
+                                watch)
             if site_path is not None:
                 from arproj.run.scan import write_site
 

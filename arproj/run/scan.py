@@ -19,7 +19,16 @@ from scanner.hardware import DeviceBackend, DeviceRobot, Operator
 from scanner.laser import LaserConfig
 from scanner.log import ScanLog
 from scanner.plan import DriveConfig, make_planner
-from scanner.run import DirectBackend, ProgressFn, ScanResult, config_from_meta, run_scan, scan_meta, simulated_site
+from scanner.run import (
+    DirectBackend,
+    ProgressFn,
+    ScanResult,
+    ScanWatcher,
+    config_from_meta,
+    run_scan,
+    scan_meta,
+    simulated_site,
+)
 from scanner.sensor_model import SensorConfig
 from scanner.wall import Wall, load_wall, shipped_walls
 
@@ -95,11 +104,13 @@ def new_scan_log(path: str | Path, wall: Wall, wall_source: str, settings: ScanS
 
 
 def scan_simulated(wall: Wall, settings: ScanSettings, log: ScanLog | None = None,
-                   progress: ProgressFn | None = None) -> SimulatedScan:
-    """Scan `wall` on the simulated site; every pass goes to `log` if given (resuming from what it holds)."""
+                   progress: ProgressFn | None = None, watch: ScanWatcher | None = None) -> SimulatedScan:
+    """Scan `wall` on the simulated site; every pass goes to `log` if given (resuming from what it holds), and
+    every frame and pass to `watch` (a recording, a live view)."""
     world, robot = simulated_site(wall, settings.sensor, settings.drives, settings.seed)
     options: dict[str, Any] = {"plan_kind": settings.plan, "plan_options": settings.plan_options,
-                               "sensor": settings.sensor, "drives": settings.drives, "log": log, "progress": progress}
+                               "sensor": settings.sensor, "drives": settings.drives, "log": log, "progress": progress,
+                               "watch": watch}
     if not settings.serial:
         return SimulatedScan(run_scan(wall, DirectBackend(world), robot, **options))
     from devices.sim import FaultConfig
@@ -112,7 +123,7 @@ def scan_simulated(wall: Wall, settings: ScanSettings, log: ScanLog | None = Non
 
 def scan_on_devices(wall: Wall, settings: ScanSettings, urls: DeviceUrls, log: ScanLog | None = None,
                     progress: ProgressFn | None = None, operator: Operator | None = None, realtime: bool = True,
-                    timeout_s: float = 0.5) -> SimulatedScan:
+                    timeout_s: float = 0.5, watch: ScanWatcher | None = None) -> SimulatedScan:
     """Scan `wall` (its size and plan; what is inside it is measured) with the devices at `urls`, the hardware
     code path `scan_simulated` runs on its simulators. realtime False: the devices run motion on a virtual clock
     (`arproj devices serve`), so a lost answer is waited for by the link's timeout, not by the motion's time."""
@@ -123,7 +134,8 @@ def scan_on_devices(wall: Wall, settings: ScanSettings, urls: DeviceUrls, log: S
         backend.start()
         robot.start()
         result = run_scan(wall, backend, robot, plan_kind=settings.plan, plan_options=settings.plan_options,
-                          sensor=settings.sensor, drives=settings.drives, log=log, progress=progress)
+                          sensor=settings.sensor, drives=settings.drives, log=log, progress=progress,
+                          watch=watch)
     finally:
         backend.close()
         robot.close()

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from geometry.errors import InputError
-from scanner.laser import HEADS, LaserConfig, draw_alignment, fix_from_scans, room_from_scans, simulated_head_scan
+from scanner.laser import HEADS, LaserConfig, Scan, draw_alignment, fix_from_scans, room_from_scans, simulated_head_scan
 from scanner.plan import DriveConfig, FrameTarget, frame_pose_apply, move_position
 from scanner.sensor_model import SensorConfig, SensorModel
 from scanner.wall import Wall
@@ -33,6 +33,7 @@ class FrameReport:
     true: Pose | None
     laser: dict[str, float] | None = None  # the 2-D laser's fix (scanner.laser.LASER_KEYS), if any
     room: dict[str, float] | None = None  # the room's size as the same laser turns saw it (scanner.laser.ROOM_KEYS)
+    scans: dict[str, Scan] | None = None  # the laser turns themselves, by head (what a recording replays)
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,8 @@ class SimRobot:
             except InputError:
                 fix = None  # no fix (walls not in view): the frame keeps its localization alone
             room = room_from_scans(scans[0], scans[1], seed=frame.frame_id)
+            turns = dict(zip(HEADS, scans, strict=True))
+            return FrameReport(commanded, stop.estimate, stop.cov, stop.true, fix, room, turns)
         return FrameReport(commanded, stop.estimate, stop.cov, stop.true, fix, room)
 
 

@@ -1,0 +1,184 @@
+"""The live view of a scan in Rerun (`arproj scan --view`): what the robot does and what the map learns, as it
+happens, on the scan's own clock (timeline `scan_time`, seconds) and by pass (timeline `pass`).
+
+Entities (2-D, wall metres, x along the wall, y up):
+  wall/outline              the wall's rectangle
+  wall/samples/<batch>      every pass's samples, coloured by the inductive reading (a batch: those sent at once)
+  wall/coverage             the cells the safety channels covered so far (both: green, one: amber)
+  wall/map/<channel>        the growing map of each channel: the mean reading in each cell so far (0..1 of
+                            the display as 0..255), nothing where no sample fell
+  wall/detections/<channel> the peaks the passes found along their course so far (what the adaptive plan traces)
+  wall/robot                the robot's localised pose at each frame (the drive frame's origin and axes)
+  wall/scanner              the scanner on the drives: where each pass sent since ended, the last one largest
+Rerun's 2-D view draws y downwards: every position is sent as (x, top − y), so the wall stands upright.
+Samples, detections and grids are sent every IMAGE_PERIOD_S of wall-clock time and at the end, so that a large
+wall costs the scan little (a call to Rerun costs about a millisecond); the robot's pose at once. `FILE.rrd`
+saves the recording (`rerun FILE.rrd` opens it); `live` spawns a viewer.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rerun as rr
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from geometry.errors import InputError
+from mapping.evidence import DEFAULT_COVERAGE_RADIUS_M, SAFETY_CHANNELS
+from mapping.grid import GridInfo
+from scanner.channels import NAMES as CHANNEL_NAMES
+from scanner.peaks import detect_peaks
+from scanner.sim.world import FrameReport
+
+IMAGE_PERIOD_S = 2.0
+DETECTION_STEP_M = 0.004  # the view's peak search resamples a pass this finely (an eighth of the planner's work)
+LIVE = "live"
+ENTITIES = ("wall/outline", "wall/samples", "wall/coverage", *(f"wall/map/{c}" for c in CHANNEL_NAMES),
+            *(f"wall/detections/{c}" for c in CHANNEL_NAMES), "wall/robot", "wall/scanner")
+_DETECTION_COLOUR = {"inductive": (230, 60, 40), "capacitive": (60, 120, 230), "ac": (240, 200, 0)}
+
+
+def check_target(view: str) -> None:
+    """`--view` names `live` or a FILE.rrd whose folder exists (InputError otherwise)."""
+    if view == LIVE:
+        return
+    path = Path(view)
+    if path.suffix != ".rrd":
+        raise InputError(f"--view {view}: give `live` (a viewer) or a FILE.rrd to save the recording")
+    if not path.parent.is_dir():
+        raise InputError(f"--view {view}: no folder {path.parent}", "create it first")
+
+
+class ScanView:
+    """A scanner.run.ScanWatcher that streams the scan to Rerun."""
+
+    def __init__(self, view: str, wall_width_m: float, wall_height_m: float, resolution_m: float = 0.005) -> None:
+        check_target(view)
+        self.rec = rr.RecordingStream("arproj_scan")
+        if view == LIVE:
+            self.rec.spawn()
+        else:
+            self.rec.save(view)
+        self.info = GridInfo.covering(0.0, 0.0, wall_width_m, wall_height_m, resolution_m)
+        self.top = self.info.origin_y + self.info.height * self.info.resolution
+        self.sums = {c: np.zeros(self.info.shape) for c in CHANNEL_NAMES}
+        self.counts = {c: np.zeros(self.info.shape) for c in CHANNEL_NAMES}
+        self.passes = 0
+        self._pending: list[tuple[NDArray[np.float64], NDArray[np.uint8]]] = []
+        self._batches = 0
+        self._ends: list[NDArray[np.float64]] = []
+        self.found: dict[str, list[NDArray[np.float64]]] = {c: [] for c in CHANNEL_NAMES}
+        self._sent = time.monotonic()
+        corners = np.array([[0, 0], [wall_width_m, 0], [wall_width_m, wall_height_m], [0, wall_height_m], [0, 0]])
+        self.rec.log("wall/outline", rr.LineStrips2D([self._screen(corners)]), static=True)
+        scale = rr.Transform3D(scale=[self.info.resolution, self.info.resolution, 1.0],
+                               translation=[self.info.origin_x, 0.0, 0.0])
+        for entity in ("wall/coverage", *(f"wall/map/{c}" for c in CHANNEL_NAMES)):
+            self.rec.log(entity, scale, static=True)  # pixels to wall metres
+
+    def _screen(self, xy: Any) -> NDArray[np.float64]:
+        p = np.array(xy, dtype=np.float64).reshape(-1, 2)
+        p[:, 1] = self.top - p[:, 1]
+        return p
+
+    def _at(self, t_s: float) -> None:
+        self.rec.set_time("scan_time", duration=float(t_s))
+        self.rec.set_time("pass", sequence=self.passes)
+
+    def frame(self, row: dict[str, Any], report: FrameReport | None = None) -> None:
+        self._at(row["time_s"])
+        x, y, phi = float(row["est_x_m"]), float(row["est_y_m"]), float(row["est_phi_rad"])
+        c, s = np.cos(phi), np.sin(phi)
+        axes = [self._screen([[x, y], [x + 0.1 * c, y + 0.1 * s]]), self._screen([[x, y], [x - 0.1 * s, y + 0.1 * c]])]
+        self.rec.log("wall/robot", rr.LineStrips2D(axes, colors=[(255, 0, 0), (0, 200, 0)],
+                                                   labels=[f"frame {int(row['frame_id'])}", ""]))
+
+    def scanned(self, row: dict[str, Any], samples: dict[str, NDArray[Any]]) -> None:
+        self.passes += 1
+        times = np.asarray(samples["time_s"], dtype=np.float64)
+        if len(times) == 0:
+            return
+        self._at(times[0])
+        xy = np.column_stack([samples["x_m"], samples["y_m"]])
+        ind = np.nan_to_num(np.asarray(samples.get("inductive", np.zeros(len(xy))), dtype=np.float64))
+        level = np.clip(ind, 0.0, 1.0)
+        colours = np.column_stack([255 * level, 80 + 100 * (1 - level), 255 * (1 - level)]).astype(np.uint8)
+        self._pending.append((self._screen(xy), colours))
+        rows, cols, inside = self.info.cell_of(xy)
+        for channel in CHANNEL_NAMES:
+            values = np.asarray(samples.get(channel, np.full(len(xy), np.nan)), dtype=np.float64)
+            ok = inside & np.isfinite(values)
+            np.add.at(self.sums[channel], (rows[ok], cols[ok]), values[ok])
+            np.add.at(self.counts[channel], (rows[ok], cols[ok]), 1.0)
+        self._detections(row, samples, xy)
+        self._ends.append(self._screen(xy[-1]))
+        if time.monotonic() - self._sent >= IMAGE_PERIOD_S:
+            self.images()
+
+    def _detections(self, row: dict[str, Any], samples: dict[str, NDArray[Any]], xy: NDArray[np.float64]) -> None:
+        axis = row.get("axis")
+        if axis not in ("x", "y"):  # a following pass runs along an object: its readings have no crossing
+            return
+        coord = np.asarray(samples["drive_u_m" if axis == "x" else "drive_v_m"], dtype=np.float64)
+        order = np.argsort(coord)
+        for channel in CHANNEL_NAMES:
+            values = np.asarray(samples.get(channel, ()), dtype=np.float64)
+            if len(values) != len(coord) or not np.isfinite(values).all():
+                continue
+            peaks = detect_peaks(coord, values, grid_step_m=DETECTION_STEP_M)
+            if not peaks:
+                continue
+            at = np.array([p.position for p in peaks])
+            found = np.column_stack([np.interp(at, coord[order], xy[order, 0]),
+                                     np.interp(at, coord[order], xy[order, 1])])
+            self.found[channel].append(self._screen(found))
+
+    def _covered(self, channel: str) -> NDArray[np.bool_]:
+        """The cells within the channel's coverage radius of a cell a sample fell in (the view's picture of
+        coverage, a cell coarser than the map's, mapping.evidence.Coverage, which the drill check reads)."""
+        radius = DEFAULT_COVERAGE_RADIUS_M[channel] / self.info.resolution
+        r = int(np.ceil(radius))
+        dy, dx = np.mgrid[-r:r + 1, -r:r + 1]
+        return ndimage.binary_dilation(self.counts[channel] > 0, structure=np.hypot(dx, dy) <= radius + 0.5)
+
+    def images(self) -> None:
+        """Send what came since the last time: the samples (one entity per batch, so that every sample stays in
+        view), every detection so far, the grids as they stand (flipped: an image's first row is the wall's
+        top). Batched, because each call to Rerun costs about a millisecond whatever it carries."""
+        self._sent = time.monotonic()
+        if self._pending:
+            xy, colours = (np.concatenate(parts) for parts in zip(*self._pending, strict=True))
+            self.rec.log(f"wall/samples/{self._batches}", rr.Points2D(xy, colors=colours, radii=0.0015))
+            self._batches += 1
+            self._pending = []
+        if self._ends:  # where the scanner ended each pass since, the last one largest
+            ends = np.concatenate(self._ends)
+            self.rec.log("wall/scanner", rr.Points2D(ends, radii=[0.004] * (len(ends) - 1) + [0.01],
+                                                     colors=[(0, 0, 0)]))
+            self._ends = []
+        for channel, found in self.found.items():
+            if found:
+                self.rec.log(f"wall/detections/{channel}", rr.Points2D(np.concatenate(found), radii=0.006,
+                                                                      colors=[_DETECTION_COLOUR[channel]]))
+        covered = [self._covered(c) for c in SAFETY_CHANNELS]
+        both, some = np.all(covered, axis=0), np.any(covered, axis=0)
+        cover = np.zeros((*self.info.shape, 4), np.uint8)
+        cover[some] = (240, 170, 0, 120)
+        cover[both] = (0, 170, 60, 120)
+        self.rec.log("wall/coverage", rr.Image(cover[::-1]))
+        for channel in CHANNEL_NAMES:
+            seen = self.counts[channel] > 0
+            mean = np.divide(self.sums[channel], self.counts[channel], out=np.zeros(self.info.shape), where=seen)
+            image = np.zeros((*self.info.shape, 4), np.uint8)  # grey, unseen cells transparent
+            image[..., :3] = np.clip(255 * mean, 0, 255)[..., None]
+            image[..., 3] = 255 * seen
+            self.rec.log(f"wall/map/{channel}", rr.Image(image[::-1]))
+
+    def close(self) -> None:
+        self.images()
+        self.rec.flush()
+        self.rec.disconnect()
