@@ -107,7 +107,7 @@ def test_report_shows_every_picture_and_the_accuracy_table(finished_demo) -> Non
         assert picture is not None and picture.std() > 5, name  # a real picture, not a blank
     assert "Measured accuracy against the truth" in page
     # every row measured but the calibration's validation: the design-values rig was not calibrated
-    assert page.count("not measured") == 1 and "calibration validation</td><td class=num><span" in page
+    assert page.count("not measured") == 1 and 'calibration validation</td><td class="num"><span' in page
     assert "Time per stage" in page and "failed" not in page
     frame = cv2.imread(str(out / "prewarped_frame.png"))
     assert frame.shape == (800, 1280, 3)
