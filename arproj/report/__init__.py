@@ -109,11 +109,11 @@ def limitations(ctx: Any) -> dict[str, list[str]]:
         unknown.append(f"This scan: {_fmt(fig['wall looked at by both safety channels %'])} % of the wall was "
                        f"looked at by both safety channels; {_fmt(fig.get('hazard length unknown %', float('nan')))}"
                        " % of the hazards' length lies in unknown ground.")
-    inferred = ["A line joined across ground no sensor covered is inferred, not measured: drawn dashed in map.png "
-                "and treated as unknown by the drill check."]
+    inferred = ["A line joined across ground no sensor covered is inferred: an estimate, not a reading; drawn "
+                "dashed in map.png and treated as unknown by the drill check."]
     if "inferred stretches" in fig:
         inferred.append(f"This map: {fig['inferred stretches']} inferred stretch(es), "
-                        f"{_fmt(fig.get('inferred length m', 0.0))} m in all.")
+                        f"{100 * float(fig.get('inferred length m', 0.0)):.1f} cm in all.")
     run = ["Every figure of this report is measured on a simulated site against its exact truth; on a real wall "
            "the sensors' noise, the material and the wall's contents differ."]
     if ctx.design_rig_used:

@@ -17,8 +17,11 @@ TIMEOUT_S = 60.0
 
 
 def chromium() -> str | None:
-    """The headless browser's executable ($ARPROJ_CHROMIUM, else the first of NAMES on PATH), or None."""
+    """The headless browser's executable ($ARPROJ_CHROMIUM, else the first of NAMES on PATH), or None (also
+    for ARPROJ_CHROMIUM=none: tests of other things skip the 2-3 s a PDF costs)."""
     chosen = os.environ.get("ARPROJ_CHROMIUM")
+    if chosen == "none":
+        return None
     if chosen:
         return shutil.which(chosen)
     return next((found for name in NAMES if (found := shutil.which(name))), None)
