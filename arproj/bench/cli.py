@@ -2,14 +2,16 @@
 
 Each is started as a new process, as a user starts it, several times, interleaved with the peer so that a busy
 machine slows both alike; the figure is the median wall time. Peer: `python -c "import typer, rich"` in the same
-interpreter — what any typer CLI with rich help pays before it does anything — and, as the floor, `python -c
-pass`. Target: `arproj --help` and `arproj --version` ≤ 0.5 s. Also checked: which of the heavy modules
-(HEAVY_MODULES) `arproj --help` loads — none should be; they are imported where they are used.
+interpreter — what any typer CLI with rich help pays before it does anything — and, beside it, a one-command
+typer app printing its --help (typer's help rendering: rich.console, markdown) and `python -c pass`.
+Target: `arproj --help` and `arproj --version` ≤ 0.5 s. Also checked: which of the heavy modules (HEAVY_MODULES)
+`arproj --help` loads — none should be; they are imported where they are used.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -24,6 +26,11 @@ REPEATS, QUICK_REPEATS = 15, 5
 # What a start must not pay for: seconds of import between them (scipy 0.5 s, OpenCV, trimesh, GL).
 HEAVY_MODULES = ("scipy", "trimesh", "cv2", "moderngl", "shapely", "networkx", "pyrender", "PIL")
 PEER = "python -c \"import typer, rich\""
+# The floor of any typer CLI's --help: a one-command app with arproj's markup mode printing its help.
+TYPER_FLOOR = "a one-command typer app --help"
+TYPER_FLOOR_CODE = ("import typer\napp = typer.Typer(rich_markup_mode='markdown', add_completion=False)\n"
+                    "@app.command()\ndef hello(name: str = typer.Option('x', help='Who.')) -> None:\n"
+                    "    'Say hello.'\napp()\n")
 
 
 def arproj_command() -> list[str]:
@@ -50,9 +57,17 @@ def heavy_modules_loaded(args: list[str]) -> list[str]:
                        f"{done.stderr.strip()[-500:]}")
 
 
+def start_env() -> dict[str, str]:
+    """The environment of the timed starts: this one, but with bytecode caching on, as a user's Python has it
+    (PYTHONDONTWRITEBYTECODE=1 would compile arproj's own sources anew at every start, 0.1 s)."""
+    env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
+
+
 def wall_time(cmd: list[str]) -> float:
     start = time.perf_counter()
-    done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, timeout=60)
+    done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, timeout=60, env=start_env())
     seconds = time.perf_counter() - start
     if done.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed (exit {done.returncode}): {done.stderr.decode()[-500:]}")
@@ -78,9 +93,10 @@ def measure(repeats: int) -> dict[str, list[float]]:
         "arproj --version": [*arproj, "--version"],
         "arproj scan --help": [*arproj, "scan", "--help"],
         PEER: [sys.executable, "-c", "import typer, rich"],
+        TYPER_FLOOR: [sys.executable, "-c", TYPER_FLOOR_CODE, "--help"],
         "python -c pass": [sys.executable, "-c", "pass"],
     }
-    for cmd in commands.values():  # one untimed start each: the OS's file cache, .pyc files
+    for cmd in commands.values():  # one untimed start each: the OS's file cache, the .pyc files written
         wall_time(cmd)
     times: dict[str, list[float]] = {name: [] for name in commands}
     for _ in range(repeats):
@@ -107,6 +123,8 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
         title=f"Start-up of the command line, median of {repeats} runs each (interleaved)",
         columns=columns(StartRow), rows=[cells(r) for r in rows],
         notes=[f"peer: {PEER} in the same interpreter ({sys.executable}), run in the same rounds",
+               f"{TYPER_FLOOR}: what typer's rich help costs any CLI (rich.console, markdown) beyond the peer",
+               "bytecode caching on for every start (PYTHONDONTWRITEBYTECODE removed), as a user's Python has it",
                "heavy modules loaded by `arproj --help`: " + (", ".join(heavy) if heavy else "none")
                + f" (of {', '.join(HEAVY_MODULES)})"],
         headline={
