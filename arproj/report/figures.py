@@ -51,7 +51,7 @@ def draw_truth_on_photo(image: NDArray[np.uint8], wall: Any, T_room_from_wall: N
         drawn += 1
         if len(points) == 1:
             u, v = (round(float(c)) for c in uv[0])
-            for colour, thick in ((TRUTH_SHADOW, 3), (TRUTH_COLOUR, 1)):
+            for colour, thick in ((TRUTH_SHADOW, 4), (TRUTH_COLOUR, 2)):
                 cv2.drawMarker(out, (u, v), colour, cv2.MARKER_CROSS, 14, thick, cv2.LINE_AA)
             continue
         run = 0.0  # arc length along the projected line, for the dashes
@@ -62,8 +62,9 @@ def draw_truth_on_photo(image: NDArray[np.uint8], wall: Any, T_room_from_wall: N
             seg = float(np.linalg.norm(b - a))
             if (run // DASH_PX) % 2 == 0:
                 pa, pb = tuple(np.round(a).astype(int)), tuple(np.round(b).astype(int))
-                cv2.line(out, pa, pb, TRUTH_SHADOW, 3, cv2.LINE_AA)
-                cv2.line(out, pa, pb, TRUTH_COLOUR, 1, cv2.LINE_AA)
+                # white 2 px on black 4 px: a 1 px white line antialiased to grey read as a black mark
+                cv2.line(out, pa, pb, TRUTH_SHADOW, 4, cv2.LINE_AA)
+                cv2.line(out, pa, pb, TRUTH_COLOUR, 2, cv2.LINE_AA)
             run += seg
     return out, drawn
 

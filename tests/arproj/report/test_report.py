@@ -101,6 +101,20 @@ def test_every_object_class_is_scored_and_a_wrong_class_is_named(report: Path) -
     assert 'src="map_vs_truth.png"' in page and "missing picture missing.png" in page
 
 
+def test_the_map_against_truth_draws_what_its_caption_says(report: Path) -> None:
+    """The truth wide in light grey; the screw mapped as a power line labelled in red."""
+    import cv2
+
+    from arproj.report.figures import MAP_VS_TRUTH_TEXT, TRUTH_GREY
+
+    image = cv2.cvtColor(cv2.imread(str(report / "map_vs_truth.png")), cv2.COLOR_BGR2RGB).astype(int)
+    grey = np.array([int(TRUTH_GREY[i:i + 2], 16) for i in (1, 3, 5)])
+    assert (np.abs(image - grey).sum(axis=2) <= 6).sum() > 500
+    red = (image[..., 0] > 170) & (image[..., 1] < 40) & (image[..., 2] < 40)
+    assert red.sum() > 20
+    assert "light grey" in MAP_VS_TRUTH_TEXT and "red label" in MAP_VS_TRUTH_TEXT
+
+
 def test_the_page_in_the_browser_loads_every_image_and_fits_the_page_width(report: Path) -> None:
     result = browser_check(report / "report.html")
     assert result["width"] <= PRINT_WIDTH_PX
