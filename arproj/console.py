@@ -4,17 +4,12 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Iterable, Iterator
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 from rich.console import Console
-from rich.progress import (
-    BarColumn,
-    MofNCompleteColumn,
-    Progress,
-    TextColumn,
-    TimeElapsedColumn,
-    TimeRemainingColumn,
-)
+
+if TYPE_CHECKING:
+    from rich.progress import Progress
 
 # Tables stay readable when output goes to a file or a CI log (rich would squeeze them to 80 columns).
 console = Console(width=None if sys.stdout.isatty() else 150)
@@ -31,6 +26,15 @@ class Interrupted(Exception):  # noqa: N818 - what a person sees: "interrupted"
 def progress_bar(auto_refresh: bool = True) -> Progress:
     """A progress bar with count, elapsed time and an estimate of the time left (on stderr). auto_refresh=False:
     redrawn at each step, with no thread of its own."""
+    from rich.progress import (  # not at import: `arproj --help` needs none of it
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
     return Progress(
         TextColumn("[bold]{task.description}"),
         BarColumn(),

@@ -25,7 +25,7 @@ import time
 import traceback
 import warnings
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -216,6 +216,7 @@ def stage_scan(ctx: DemoContext) -> None:
 
 def stage_map(ctx: DemoContext) -> None:
     """Map from the scan log (stitched frames), every export, and the map's accuracy against the wall file."""
+    from geometry.polyline import polyline_length
     from mapping.evaluate import evaluate, false_safe, fastener_recall
     from mapping.exports import export_all
     from mapping.pipeline import sample_positions
@@ -243,12 +244,30 @@ def stage_map(ctx: DemoContext) -> None:
         figures["sample position error as logged mm"] = float(1000 * np.linalg.norm(logged - truth, axis=1).mean())
         figures["sample position error after stitching mm"] = float(
             1000 * np.linalg.norm(result.sample_xy - truth, axis=1).mean())
+    inferred = [polyline_length(p) for o in result.mapped_objects() if o.shape == "line" for p in o.parts(False)]
+    figures["inferred stretches"] = len(inferred)
+    figures["inferred length m"] = float(sum(inferred))
     figures["notes"] = "; ".join(result.notes + result.warnings)
     ctx.figures["map"] = figures
+    map_against_truth(ctx, result.objects)
     ctx.picture("map/map.png", "The in-wall map: classified objects with legend and scale bar (wall coordinates, "
                 "origin at the lower-left corner seen from the room).", "map")
     ctx.picture("map/signals.png", "Raw signals along one line across the wall, as the paper's figures 5 and 6: "
                 "inductive and AC readings against the position, with the crossings of the mapped objects.", "map")
+
+
+def map_against_truth(ctx: DemoContext, objects: list[Any]) -> None:
+    """Every wall object scored against the map (fasteners, studs and cavities too; a wrong class named as
+    such), into ctx.figures["map scores"], and the map-against-truth figure."""
+    from arproj.report.figures import MAP_VS_TRUTH_TEXT, map_vs_truth_figure
+    from mapping.evaluate import object_scores, unmatched_objects
+
+    scores = object_scores(objects, ctx.wall)
+    unmatched = unmatched_objects(objects, ctx.wall)
+    ctx.figures["map scores"] = {"objects": [asdict(s) for s in scores],
+                                 "on nothing": [o.cls for o in unmatched]}
+    map_vs_truth_figure(objects, ctx.wall, scores, unmatched, ctx.out / "map_vs_truth.png")
+    ctx.picture("map_vs_truth.png", "The map against the truth. " + MAP_VS_TRUTH_TEXT, "map")
 
 
 def stage_mesh(ctx: DemoContext) -> None:
@@ -428,6 +447,7 @@ def stage_wall_pose(ctx: DemoContext) -> None:
         "pattern corners used": reg.plane.corners,
         "expected registration σ mm": 1000 * reg.sigma_m,
         "distance to the wall m": reg.distance_m, "incidence deg": reg.incidence_deg,
+        "robot position in the wall frame m (truth)": [round(float(v), 3) for v in truth.T_wall_from_robot[:3, 3]],
         "in-plane position of the wall frame from": reg.prior_source}
     pattern = session.last_pattern_capture
     if pattern is not None:
@@ -470,7 +490,7 @@ def stage_prewarp(ctx: DemoContext) -> None:
 
 def stage_photograph(ctx: DemoContext) -> None:
     """Photograph the wall with the pre-warped frame projected on it (paper fig. 16), and with the truth drawn."""
-    from arproj.report.figures import draw_truth_on_photo
+    from arproj.report.figures import TRUTH_ON_PHOTO_TEXT, draw_truth_on_photo
 
     session = ctx.session()
     frame = cv2.cvtColor(cv2.imread(str(ctx.out / "prewarped_frame.png")), cv2.COLOR_BGR2RGB)
@@ -493,8 +513,9 @@ def stage_photograph(ctx: DemoContext) -> None:
                                  "head (pan, tilt) deg": [round(a, 3) for a in session.head_deg()]}
     ctx.picture("photo_on_wall.png", "The wall photographed by the robot's left camera with the map projected on it "
                 "(as the paper's figure 16).", "photograph")
-    ctx.picture("photo_with_truth.png", "The same photograph with the wall file's truth drawn in thin white dashes "
-                "(exact camera pose of the simulation): where the projected lines should be.", "photograph")
+    ctx.picture("photo_with_truth.png", f"The same photograph with the wall file's truth drawn in "
+                f"{TRUTH_ON_PHOTO_TEXT} (exact camera pose of the simulation): where the projected lines should be.",
+                "photograph")
 
 
 STAGES: list[tuple[str, Callable[[DemoContext], None], tuple[str, ...]]] = [

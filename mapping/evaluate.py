@@ -347,3 +347,111 @@ def depth_errors(objects: list[MapObject], wall: Wall) -> list[tuple[str, float,
         if truth is not None:
             out.append((truth.id, float(obj.depth_m) - truth.depth_m, float(obj.depth_sigma_m or float("nan"))))
     return out
+
+
+# -- every object, every class: what the report's score table lists -----------------------------------------
+ACCEPTED_CLASSES = {"power_line": ("power_line",), "metal_pipe": ("metal_pipe",), "fastener": ("fastener",),
+                    "non_metal": ("non_metal", "wood"), "metal": ("metal", "metal_pipe"), "cavity": ("cavity",),
+                    "plastic_pipe": ()}
+
+
+@dataclass
+class ObjectScore:
+    """One wall object against the map. verdict: found (the right class), wrong class, missed, or invisible
+    (no channel can see it: a dry plastic pipe)."""
+
+    id: str
+    kind: str
+    truth_class: str
+    depth_mm: float
+    verdict: str
+    mapped_class: str | None = None
+    note: str = ""
+
+
+def _distances(points: NDArray[np.float64], obj: MapObject) -> NDArray[np.float64]:
+    """Distance of points to a mapped object; 0 inside an outline."""
+    from scanner.sensor_model import points_in_polygon
+
+    ring = np.asarray(obj.points_m, dtype=np.float64)
+    d = distances_to_polyline(points, ring) if len(ring) > 1 else np.linalg.norm(points - ring[0], axis=1)
+    if obj.kind == "outline" and len(ring) >= 3:
+        d = np.where(points_in_polygon(points, ring), 0.0, d)
+    return d
+
+
+def object_scores(objects: list[MapObject], wall: Wall, match_m: float = MATCH_M,
+                  min_coverage: float = MIN_COVERAGE, max_depth_m: float = MAX_DEPTH_M) -> list[ObjectScore]:
+    """Every object of the wall file, fasteners, studs, plates and cavities included, with the class the map
+    gave it: a line is found where mapped objects cover min_coverage of its centre line within match_m (the
+    class by length-weighted majority), a screw or nail by the nearest mapped object within match_m, an area
+    by a mapped object at its middle (as area_recall). A class outside ACCEPTED_CLASSES is a wrong class
+    (a screw mapped as a power line), never a find."""
+    scores = []
+    for t in wall.objects:
+        cls = truth_class(t)
+        depth_note = f"deeper than the sensors reach ({max_depth_m * 1000:.0f} mm)" if t.depth_m > max_depth_m \
+            else ""
+        score = ObjectScore(t.id, t.kind, cls, round(1000 * t.depth_m, 1), "missed", note=depth_note)
+        scores.append(score)
+        if cls == "plastic_pipe":
+            score.verdict, score.note = "invisible", "dry plastic: no channel of the scanner sees it"
+            continue
+        geometry = np.asarray(t.geometry_m, dtype=np.float64)
+        if t.kind in ("pipe", "cable"):
+            probe = densify(geometry, 0.005)
+            reach = match_m
+        elif t.kind in ("screw", "nail"):
+            probe, reach = geometry[:1], match_m
+        else:  # an area: its middle, reached as area_recall reaches it
+            probe = geometry.mean(axis=0, keepdims=True)
+            reach = AREA_MATCH_M + 0.5 * float(np.ptp(geometry, axis=0).min())
+        if not objects:
+            continue
+        dists = np.stack([_distances(probe, o) for o in objects])
+        covered = dists.min(axis=0) <= reach
+        if covered.mean() < (min_coverage if len(probe) > 1 else 1.0):
+            if covered.any():
+                score.note = f"{covered.mean():.0%} of its length mapped" + (f"; {depth_note}" if depth_note
+                                                                               else "")
+            continue
+        votes: dict[str, int] = {}
+        for k in dists.argmin(axis=0)[covered]:
+            votes[objects[k].cls] = votes.get(objects[k].cls, 0) + 1
+        accepted = [c for c in votes if c in ACCEPTED_CLASSES.get(cls, (cls,))]
+        score.mapped_class = accepted[0] if accepted and len(probe) == 1 else max(votes, key=votes.__getitem__)
+        score.verdict = "found" if score.mapped_class in ACCEPTED_CLASSES.get(cls, (cls,)) else "wrong class"
+    return scores
+
+
+def class_summary(scores: list[ObjectScore]) -> dict[str, dict[str, int]]:
+    """truth class -> {"objects", "found", "wrong class", "missed", "invisible"}: every class in the wall."""
+    out: dict[str, dict[str, int]] = {}
+    for s in scores:
+        row = out.setdefault(s.truth_class, {"objects": 0, "found": 0, "wrong class": 0, "missed": 0,
+                                             "invisible": 0})
+        row["objects"] += 1
+        row[s.verdict] += 1
+    return out
+
+
+def unmatched_objects(objects: list[MapObject], wall: Wall, match_m: float = MATCH_M) -> list[MapObject]:
+    """Mapped objects that lie on nothing in the wall file (no point of them within 2 match_m of any object)."""
+    truth = [np.asarray(t.geometry_m, dtype=np.float64) for t in wall.objects]
+    out = []
+    for o in objects:
+        pts = densify(np.asarray(o.points_m, dtype=np.float64), 0.005) if len(o.points_m) > 1 else \
+            np.asarray(o.points_m, dtype=np.float64)
+        near = False
+        for g in truth:
+            d = distances_to_polyline(pts, g) if len(g) > 1 else np.linalg.norm(pts - g[0], axis=1)
+            if len(g) >= 3:  # an area: inside it counts as on it
+                from scanner.sensor_model import points_in_polygon
+
+                d = np.where(points_in_polygon(pts, g), 0.0, d)
+            if float(d.min()) <= 2 * match_m:
+                near = True
+                break
+        if not near:
+            out.append(o)
+    return out

@@ -468,6 +468,18 @@ def shipped_walls() -> dict[str, Path]:
     return {p.stem: p for p in sorted(folder.glob("*.yaml"))}
 
 
+def wall_file(wall: str | Path, option: str = "--wall") -> Path:
+    """The path of a wall file, or of a shipped wall given by its name (`paper_test_plate`); an InputError
+    naming `option` when neither exists, so every command accepts the same names and says the same."""
+    path = Path(wall)
+    if not path.exists() and path.parent == Path() and path.stem in shipped_walls():
+        return shipped_walls()[path.stem]
+    if not path.exists():
+        raise InputError(f"{option} {wall}: no such file",
+                         f"pass a wall file (YAML) or a shipped wall: {', '.join(shipped_walls())}")
+    return path
+
+
 def random_wall(seed: int, width_m: float = 2.5, height_m: float = 2.0, n_pipes: int = 3, n_cables: int = 4,
                 n_screws: int = 6, with_stud: bool = True, material: str = "brick") -> Wall:
     """A plausible random wall: pipes and cables run in installation zones, mostly horizontal or vertical.

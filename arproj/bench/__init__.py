@@ -10,10 +10,14 @@ the headline picks its figures from the rows by name.
 
 from __future__ import annotations
 
+import ast
 import importlib
+import inspect
 import json
 import pkgutil
+import tokenize
 from dataclasses import MISSING, asdict, dataclass, field, fields
+from pathlib import Path
 from types import ModuleType
 from typing import Any
 
@@ -21,7 +25,6 @@ from rich.measure import Measurement
 from rich.table import Table
 
 from arproj.console import console
-from geometry.plain import plain
 
 # Quick runs take fewer trials: a target's "met" there is a hint, not the verdict.
 QUICK_CAVEAT = " (--quick: indicative only, judged on the full run)"
@@ -61,6 +64,8 @@ class BenchTable:
     environment: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> str:
+        from geometry.plain import plain  # numpy: not for `arproj --help`
+
         return json.dumps(asdict(self), indent=2, default=plain)
 
     def print(self, targets: bool = True) -> None:
@@ -119,6 +124,28 @@ def _fmt(v: Any) -> str:
     if isinstance(v, bool):
         return "yes" if v else "NO"
     return str(v)
+
+
+def benchmark_docs() -> dict[str, str]:
+    """name -> docstring of every benchmark in this package, read from the source without importing it: the
+    modules pull in scipy, OpenCV and GL, which `arproj --help` must not pay for."""
+    docs = {}
+    for m in pkgutil.iter_modules(__path__):
+        if not m.name.startswith("_"):
+            docs[m.name] = _docstring(Path(__path__[0]) / f"{m.name}.py") or m.name
+    return docs
+
+
+def _docstring(path: Path) -> str | None:
+    """A module's docstring: its first token, if a string (parsing the whole file would cost 0.1 s for all)."""
+    with path.open(encoding="utf-8") as file:
+        for token in tokenize.generate_tokens(file.readline):
+            if token.type in (tokenize.COMMENT, tokenize.NL, tokenize.NEWLINE, tokenize.ENCODING):
+                continue
+            if token.type == tokenize.STRING:
+                return inspect.cleandoc(ast.literal_eval(token.string))
+            return None
+    return None
 
 
 def benchmark_modules() -> dict[str, ModuleType]:

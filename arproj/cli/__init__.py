@@ -39,8 +39,19 @@ try:  # everything the commands need is imported here: a Ctrl-C meanwhile is one
     from arproj.console import Interrupted
     from geometry.errors import InputError
 
+    class _Group(typer.core.TyperGroup):
+        """The root command: a usage error for extra arguments that are files says how it came about."""
+
+        def invoke(self, ctx: typer.Context) -> object:
+            try:
+                return super().invoke(ctx)
+            except typer._click.exceptions.UsageError as err:
+                err.message = glob_hint(err.message)
+                raise
+
     app = typer.Typer(
         name="arproj",
+        cls=_Group,
         help="Find what is hidden inside a wall (power lines, pipes, cavities) and project it back onto that "
         "wall, undistorted.\n\nStart with `arproj demo`: the whole system on a simulated site, no hardware.",
         no_args_is_help=True,
@@ -72,6 +83,19 @@ try:  # everything the commands need is imported here: a Ctrl-C meanwhile is one
 except KeyboardInterrupt:
     print(f"\n{INTERRUPTED} while starting", file=sys.stderr)
     sys.exit(EXIT_INTERRUPTED)
+
+
+def glob_hint(message: str) -> str:
+    """typer's "Got unexpected extra argument(s) (A B …)", when they name files, with the likely cause: a shell
+    expanded an unquoted glob (`--left DIR/left*.jpg`) into many names, of which the option took the first."""
+    prefix = "Got unexpected extra argument"
+    if not message.startswith(prefix) or "(" not in message:
+        return message
+    extra = message[message.index("(") + 1:].removesuffix(")").split(" ")
+    if not any(os.path.exists(name) for name in extra):
+        return message
+    return (f"{message}: these are files, as the shell makes of an unquoted glob — quote the glob (e.g. "
+            "'DIR/left*.jpg') so that arproj gets the pattern")
 
 
 _built: dict[tuple[int, int], typer.core.TyperGroup] = {}

@@ -8,11 +8,11 @@ import sys
 
 import typer
 
-from arproj.bench import QUICK_CAVEAT, BenchTable, benchmark_modules, headline_table
+from arproj.bench import QUICK_CAVEAT, BenchTable, benchmark_docs, headline_table
 from arproj.console import console, err_console
 
 
-def _command(name: str, module):
+def _command(name: str, doc: str):
     def command(
         as_json: bool = typer.Option(False, "--json", help="Print the results as JSON instead of a table."),
         quick: bool = typer.Option(False, "--quick", help="Fewer trials, for a fast check (figures are "
@@ -20,6 +20,9 @@ def _command(name: str, module):
         seed: int = typer.Option(0, "--seed", help="Seed of the simulated inputs."),
     ) -> None:
         # Whatever a benchmark says while it runs goes to stderr: stdout carries only the table (or the JSON).
+        import importlib  # the benchmark (scipy, OpenCV, GL) only when it runs: `--help` stays fast
+
+        module = importlib.import_module(f"arproj.bench.{name}")
         with contextlib.redirect_stdout(sys.stderr):
             table: BenchTable = module.run(quick=quick, seed=seed)
         table.environment["quick"] = quick
@@ -28,14 +31,14 @@ def _command(name: str, module):
         else:
             table.print()
 
-    command.__doc__ = (module.__doc__ or name).strip()
+    command.__doc__ = doc.strip()
     return command
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
-    modules = benchmark_modules()
-    for name, module in modules.items():
-        bench_app.command(name)(_command(name, module))
+    modules = benchmark_docs()
+    for name, doc in modules.items():
+        bench_app.command(name)(_command(name, doc))
 
     @bench_app.command("all")
     def bench_all(

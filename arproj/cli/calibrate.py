@@ -19,7 +19,6 @@ import typer
 from arproj.console import console, err_console, progress_bar, track
 from calibration.defaults import DEFAULT_BOARD
 from geometry.errors import InputError
-from geometry.plain import plain
 
 if TYPE_CHECKING:
     from arproj.wizard.live_run import LiveOptions
@@ -222,6 +221,8 @@ def live_projector_command(opts: LiveOptions, size: str, sim: bool = False, smal
                            laser=u.laser, mover=u.board, projector_size=site.projector_size)
             summary = run_live(opts, bar, design_mount=truth["T_robot_from_camera_left_design"], truth=truth)
     if as_json:
+        from geometry.plain import plain  # numpy: not at import, for `arproj --help`
+
         print(json.dumps(summary, indent=2, default=plain))
     else:
         _print_live(summary)

@@ -25,8 +25,9 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         range_images: Path | None = typer.Option(None, "--range-images", help="Range images (.npz: depth_k, "
                                                  "K_k, T_world_from_camera_k, optional T_world_from_wall) "
                                                  "whose merged surface becomes wall.glb's mesh."),
-        wall: Path | None = typer.Option(None, "--wall", help="Wall file with the truth (simulation): print "
-                                         "recall, precision and position error against it."),
+        wall: Path | None = typer.Option(None, "--wall", help="Wall file with the truth (simulation), or a "
+                                         "shipped wall's name: print recall, precision and position error "
+                                         "against it."),
         record: Path | None = typer.Option(None, "--record", help="Also write the scan and this map as ROS 2 "
                                            "messages into this .mcap file (tf, passes, /map and one grid per "
                                            "channel, /objects), a rosbag2 metadata.yaml beside it."),
@@ -40,6 +41,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
         if not resolution_mm > 0:
             raise InputError(f"--resolution {resolution_mm}: the cell size must be a positive number of mm")
+        truth = None
+        if wall is not None:  # first: a wrong --wall is refused before any work
+            from scanner.wall import load_wall, wall_file
+
+            truth = load_wall(wall_file(wall))
         # every input is read and checked before anything is written: a refusal leaves an earlier map as it was
         folder = OutputFolder(out, exports.file_names() | {RANGE_IMAGES_FILE}, "map folder",
                               keep={RANGE_IMAGES_FILE})
@@ -48,11 +54,6 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             from mapping.ros.bag import check_path
 
             check_path(record)
-        truth = None
-        if wall is not None:
-            from scanner.wall import load_wall
-
-            truth = load_wall(wall)
         surface = None  # (range views, T_world_from_wall)
         if range_images is not None:
             from mapping.surface import load_range_images

@@ -45,7 +45,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         map_path: Path = typer.Option(None, "--map", help="wall.glb from `arproj map` (objects.json beside it)."),
         objects: Path = typer.Option(None, "--objects", help="objects.json, if not beside the GLB."),
         truth: Path = typer.Option(None, "--truth", help="Project a wall file's truth instead of a map "
-                                   "(scanner wall YAML; for trying the session before mapping)."),
+                                   "(scanner wall YAML or a shipped wall's name; for trying the session before "
+                                   "mapping)."),
         rig_dir: Path = typer.Option(None, "--rig", help="Rig folder from `arproj calibrate` (rig.yaml)."),
         sim: bool = typer.Option(False, "--sim", help="Run on the simulated site (head simulator over "
                                  "socket://, simulated cameras); no hardware."),
@@ -86,6 +87,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         """Project the in-wall map onto the wall, pre-warped for the beamer, with a safety gate."""
         from arproj.run.project import SessionOptions, run_session
 
+        if truth is not None:  # a shipped name or a file, checked before the session starts
+            from scanner.wall import load_wall, wall_file
+
+            truth = wall_file(truth, "--truth")
+            load_wall(truth)
         wall_index = 0
         if site is None:
             try:

@@ -1,21 +1,27 @@
-"""The demo's report: one self-contained report.html (inline CSS, no scripts, no network) beside the pictures
-it shows, which are linked by relative path so the folder can be moved or zipped as a whole.
+"""The demo's report: report.html from a Jinja2 template (templates/report.html.j2: inline CSS, no scripts, no
+network) beside the pictures it shows, linked by relative path so the folder can be moved or zipped as a whole;
+and report.pdf, the same page printed by headless Chromium (arproj.report.pdf) where it is installed.
 
-    write_report(ctx)  → OUT/report.html   (ctx: arproj.demo.DemoContext)
+    write_report(ctx)  → OUT/report.html (and OUT/report.pdf)   (ctx: arproj.demo.DemoContext)
 
-Order: what a craftsman looks at first (the wall with the map on it), then the accuracy against the truth, then
-every stage's pictures and figures for the engineer, then the time each stage took and anything missing.
+Order: what a craftsman looks at first (the wall with the map on it), then every object of the wall against the
+map, the accuracy against the truth and the limitations, then every stage's pictures and figures for the
+engineer, then the time each stage took and anything missing.
 """
 
 from __future__ import annotations
 
-import html
+import subprocess
 import time
 from pathlib import Path
 from typing import Any
 
 ACCURACY_ROWS = [  # (stage, figure, what, unit, how it is measured)
-    ("map", "recall", "objects found (recall)", "%", "pipes and cables of the wall file found by the map"),
+    ("map", "recall", "pipes and cables found (recall)", "%",
+     "pipes and cables of the wall file within the sensors' depth found by the map; every class is in the "
+     "table above"),
+    ("map", "fasteners found", "fasteners found", "", "screws and nails of the wall file with a mapped fastener "
+     "within 15 mm"),
     ("map", "precision", "precision", "%", "mapped line length that lies on a real object"),
     ("map", "position error mean mm", "map position error, mean", "mm", "mapped lines vs the wall file"),
     ("map", "position error p95 mm", "map position error, p95", "mm", "mapped lines vs the wall file"),
@@ -36,12 +42,8 @@ ACCURACY_ROWS = [  # (stage, figure, what, unit, how it is measured)
      "check marks photographed by both cameras (the session's own check)"),
 ]
 
-STYLE = """body{font-family:system-ui,sans-serif;max-width:1150px;margin:2em auto;padding:0 1em;color:#222}
-h1{margin-bottom:.2em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:2em}
-table{border-collapse:collapse;margin:.5em 0}td,th{padding:3px 12px;border-bottom:1px solid #eee;text-align:left}
-td.num{text-align:right;font-variant-numeric:tabular-nums}figure{margin:1.2em 0}img{max-width:100%;
-border:1px solid #ddd}figcaption{color:#555;font-size:.92em}.bad{color:#b00;font-weight:bold}.ok{color:#070}
-.muted{color:#777}"""
+TEMPLATES = Path(__file__).parent / "templates"
+STYLE_FILE = TEMPLATES / "report.css"
 
 
 def _fmt(value: Any, unit: str = "") -> str:
@@ -56,84 +58,146 @@ def _fmt(value: Any, unit: str = "") -> str:
     return str(value)
 
 
-def _figure(out: Path, file: str, caption: str) -> str:
-    if not (out / file).exists():
-        return f'<p class="bad">missing picture {html.escape(file)}</p>'
-    return (f'<figure><a href="{html.escape(file)}"><img src="{html.escape(file)}" alt="{html.escape(caption)}">'
-            f"</a><figcaption>{html.escape(caption)}</figcaption></figure>")
+def _label(cls: str | None) -> str:
+    from mapping.mapfile import CLASS_LABELS
+
+    if cls is None:
+        return "—"
+    return {"plastic_pipe": "plastic pipe (dry)"}.get(cls, CLASS_LABELS.get(cls, cls.replace("_", " ")))
 
 
-def write_report(ctx: Any) -> Path:
-    """Write OUT/report.html from the demo context (figures, pictures, stage records); returns its path."""
+def _robot_position(ctx: Any) -> str:
+    pose = ctx.figures.get("wall pose", {})
+    where = pose.get("robot position in the wall frame m (truth)")
+    if where is None:
+        return (f"planned {ctx.robot_distance_m():.2f} m in front of the wall's middle (the wall pose did not run, "
+                "so no measured position)")
+    text = f"x {where[0]:.3f} m, y {where[1]:.3f} m, {where[2]:.3f} m out from the wall (wall frame, simulated truth)"
+    if "distance to the wall m" in pose:
+        text += (f"; measured: {_fmt(pose['distance to the wall m'])} m from the wall at "
+                 f"{_fmt(pose.get('incidence deg', float('nan')))}° incidence")
+    return text
+
+
+def limitations(ctx: Any) -> dict[str, list[str]]:
+    """What the map cannot tell, in the sections a handheld scanner's manual has, with this run's figures."""
+    from mapping.evaluate import MAX_DEPTH_M
+    from scanner.channels import CHANNELS
+
+    fig = ctx.figures.get("map", {})
+    cannot = [f"The {c.label} sees {c.sees}; nothing else." for c in CHANNELS]
+    cannot += ["A dry plastic pipe answers no channel: it is invisible to this scanner, and a map is no proof that "
+               "none runs there.",
+               "A wooden stud and a water-filled plastic pipe both only raise the capacitive level: the map calls "
+               "either “non-metal”, never one or the other.",
+               "A cable that carries no current has no AC field: it reads as metal, not as a power line.",
+               "Screws and nails are found only where a pass came within about 4 cm of them (adaptive plan, 25 cm "
+               "rows): loose fasteners between rows can be missed (`arproj scan --row-spacing 0.075` finds them)."]
+    depth = [f"The figures count pipes and cables up to {MAX_DEPTH_M * 1000:.0f} mm deep; the inductive reading "
+             "falls with the cube of the depth, so deeper objects fade into the noise and may be missed.",
+             "Depth labels are estimates from the footprint's width, with their σ in objects.json."]
+    deep = [s for s in ctx.figures.get("map scores", {}).get("objects", [])
+            if s.get("depth_mm", 0) > MAX_DEPTH_M * 1000]
+    if deep:
+        depth.append("In this wall deeper than that: " + ", ".join(f"{s['id']} ({s['depth_mm']:.0f} mm)"
+                                                                 for s in deep) + ".")
+    unknown = ["Where no safety channel (inductive and capacitive) covered the ground, the map says unknown, "
+               "shown pale red in map.png and unlit on the wall; the drill check answers “unknown” there, never "
+               "“safe”.",
+               "Beyond the wall's edges and the scanned area, nothing is known."]
+    if "wall looked at by both safety channels %" in fig:
+        unknown.append(f"This scan: {_fmt(fig['wall looked at by both safety channels %'])} % of the wall was "
+                       f"looked at by both safety channels; {_fmt(fig.get('hazard length unknown %', float('nan')))}"
+                       " % of the hazards' length lies in unknown ground.")
+    inferred = ["A line joined across ground no sensor covered is inferred: an estimate, not a reading; drawn "
+                "dashed in map.png and treated as unknown by the drill check."]
+    if "inferred stretches" in fig:
+        inferred.append(f"This map: {fig['inferred stretches']} inferred stretch(es), "
+                        f"{100 * float(fig.get('inferred length m', 0.0)):.1f} cm in all.")
+    run = ["Every figure of this report is measured on a simulated site against its exact truth; on a real wall "
+           "the sensors' noise, the material and the wall's contents differ."]
+    if ctx.design_rig_used:
+        run.append("The calibrated rig failed; the projection used the robot's design values (uncalibrated).")
+    return {"cannot_see": cannot, "depth": depth, "unknown": unknown, "inferred": inferred, "run": run}
+
+
+def render_report(ctx: Any, no_pdf: str = "") -> str:
+    """The report's HTML for the demo context; no_pdf: why there is no report.pdf beside it ("": there is)."""
+    import jinja2
+    from markupsafe import Markup, escape
+
     from arproj.session.robot_io import TRUTH_PRIOR
     from geometry import provenance
 
     out: Path = ctx.out
     figures: dict[str, dict[str, Any]] = ctx.figures
-    parts = [f"<!doctype html><html lang=en><head><meta charset=utf-8><title>arproj demo — "
-             f"{html.escape(ctx.wall.name)}</title><style>{STYLE}</style></head><body>",
-             "<h1>arproj demo — simulated site</h1>",
-             f"<p class=muted>Wall file {html.escape(str(ctx.wall_path))} ({html.escape(ctx.wall.name)}, "
-             f"{ctx.wall.width_m} × {ctx.wall.height_m} m, {len(ctx.wall.objects)} objects); seed "
-             f"{ctx.options.seed}{', quick settings' if ctx.options.quick else ''}; written "
-             f"{time.strftime('%Y-%m-%d %H:%M')} by arproj {html.escape(provenance.version())}, command "
-             f"<code>{html.escape(provenance.command())}</code>.</p>"]
-    problems = [r for r in ctx.stages.values() if r.status in ("failed", "not run")]
-    if problems:
-        parts.append("<p class=bad>Not complete: " + "; ".join(
-            f"stage “{html.escape(r.name)}” {html.escape(r.status)} — {html.escape(r.reason)}" for r in problems)
-            + ". Figures of those stages are missing below; nothing was substituted.</p>")
+
+    def figure(pic: dict[str, str]) -> Markup:
+        file, caption = pic["file"], pic["caption"]
+        if not (out / file).exists():
+            return Markup('<p class="bad">missing picture {}</p>').format(file)
+        return Markup('<figure><a href="{0}"><img src="{0}" alt="{1}"></a><figcaption>{1}</figcaption>'
+                      "</figure>").format(file, caption)
+
     by_stage: dict[str, list[dict[str, str]]] = {}
     for pic in ctx.pictures:
         by_stage.setdefault(pic["stage"], []).append(pic)
-    hero = [p for p in by_stage.get("photograph", [])]
-    if hero:
-        parts.append("<h2>The map on the wall</h2>")
-        parts += [_figure(out, p["file"], p["caption"]) for p in hero]
-    parts.append("<h2>Measured accuracy against the truth</h2><table><tr><th>what</th><th>value</th><th>unit</th>"
-                 "<th>how it is measured</th></tr>")
-    for stage, key, what, unit, how in ACCURACY_ROWS:
-        value = figures.get(stage, {}).get(key)
-        shown = _fmt(value, unit) if value is not None else '<span class="bad">not measured</span>'
-        parts.append(f"<tr><td>{html.escape(what)}</td><td class=num>{shown}</td><td>{unit}</td>"
-                     f"<td class=muted>{html.escape(how)}</td></tr>")
-    parts.append("</table>")
-    pose = figures.get("wall pose", {})
-    source = str(pose.get("in-plane position of the wall frame from", ""))
+    truth_figures = [p for p in by_stage.get("map", []) if p["file"] == "map_vs_truth.png"]
+    accuracy = [{"what": what, "unit": unit, "how": how,
+                 "value": None if figures.get(stage, {}).get(key) is None else _fmt(figures[stage][key], unit)}
+                for stage, key, what, unit, how in ACCURACY_ROWS]
+    notes = []
+    source = str(figures.get("wall pose", {}).get("in-plane position of the wall frame from", ""))
     if source == TRUTH_PRIOR:
-        parts.append("<p class=muted>Note: the wall plane and the projector's pose are measured from the projected "
-                     "pattern; the wall frame's in-plane position (along the wall, height, rotation about the "
-                     f"normal) comes from “{html.escape(source)}”, as the projection session does on the "
-                     "simulated site — the registration figures do not include a localization error.</p>")
+        notes.append({"cls": "muted", "text": "Note: the wall plane and the projector's pose are measured from the "
+                      "projected pattern; the wall frame's in-plane position (along the wall, height, rotation "
+                      f"about the normal) comes from “{source}”, as the projection session does on the simulated "
+                      "site — the registration figures do not include a localization error."})
     if ctx.design_rig_used:
-        parts.append(f"<p class=bad>The calibrated rig failed in the wall pose "
-                     f"({html.escape(str(pose.get('calibrated rig failed', '')))}); the projection stages used the "
-                     "robot's design values (an uncalibrated rig).</p>")
+        failed = figures.get("wall pose", {}).get("calibrated rig failed", "")
+        notes.append({"cls": "bad", "text": f"The calibrated rig failed in the wall pose ({failed}); the projection "
+                      "stages used the robot's design values (an uncalibrated rig)."})
+    stages = []
     for record in ctx.stages.values():
-        name = record.name
-        parts.append(f"<h2>{html.escape(name)}</h2>")
-        if record.status in ("failed", "not run"):
-            parts.append(f'<p class="bad">{html.escape(record.status)}: {html.escape(record.reason)}</p>')
-        if name != "photograph":
-            parts += [_figure(out, p["file"], p["caption"]) for p in by_stage.get(name, [])]
-        rows = figures.get(name, {})
-        if rows:
-            parts.append("<table>" + "".join(
-                f"<tr><td>{html.escape(k)}</td><td class=num>{html.escape(_fmt(v))}</td></tr>"
-                for k, v in rows.items()) + "</table>")
-    parts.append("<h2>Time per stage</h2><table><tr><th>stage</th><th>status</th><th>seconds</th></tr>")
-    for record in ctx.stages.values():
-        cls = "ok" if record.status in ("done", "skipped") else "bad"
-        seconds = f"{record.seconds:.1f}" if record.seconds is not None else "—"
-        note = " (earlier run)" if record.status == "skipped" else ""
-        parts.append(f"<tr><td>{html.escape(record.name)}</td><td class={cls}>{html.escape(record.status)}{note}"
-                     f"</td><td class=num>{seconds}</td></tr>")
-    total = sum(r.seconds or 0.0 for r in ctx.stages.values())
-    parts.append(f"<tr><td><b>total</b></td><td></td><td class=num><b>{total:.1f}</b></td></tr></table>")
-    parts.append("<p class=muted>Files: scan.db (scan log), map/ (wall.glb, objects.json, map.png, signals.png, "
-                 "objects.dxf, map_server.yaml/.pgm, range_images.npz), rig/ (calibration), demo-state.json "
-                 "(for --resume).</p>")
-    parts.append("</body></html>")
-    path = out / "report.html"
-    path.write_text("\n".join(parts), encoding="utf-8")
+        pictures = [] if record.name == "photograph" else [p for p in by_stage.get(record.name, [])
+                                                            if p not in truth_figures]
+        stages.append({"name": record.name, "status": record.status, "reason": record.reason,
+                       "seconds": "—" if record.seconds is None else f"{record.seconds:.1f}", "pictures": pictures,
+                       "rows": [(k, _fmt(v)) for k, v in figures.get(record.name, {}).items()]})
+    scores = figures.get("map scores", {})
+    from mapping.evaluate import ObjectScore, class_summary
+
+    objects = [ObjectScore(**s) for s in scores.get("objects", [])]
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=True,
+                             undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
+    return env.get_template("report.html.j2").render(
+        style=Markup(STYLE_FILE.read_text(encoding="utf-8")), version=provenance.version(),
+        command=provenance.command(), date=time.strftime("%Y-%m-%d %H:%M %Z"), wall=ctx.wall,
+        wall_path=str(ctx.wall_path), robot=_robot_position(ctx), seed=ctx.options.seed, quick=ctx.options.quick,
+        problems=[r for r in ctx.stages.values() if r.status in ("failed", "not run")],
+        hero=by_stage.get("photograph", []), scores=objects, summary=class_summary(objects),
+        on_nothing=scores.get("on nothing", []), truth_figures=truth_figures, accuracy=accuracy,
+        accuracy_notes=notes, limits=limitations(ctx), stages=stages,
+        total_seconds=f"{sum(r.seconds or 0.0 for r in ctx.stages.values()):.1f}", no_pdf=no_pdf, figure=figure,
+        label=lambda c: escape(_label(c)))
+
+
+def write_report(ctx: Any) -> Path:
+    """Write OUT/report.html from the demo context, and OUT/report.pdf where headless Chromium is installed
+    (else, or when printing fails, the report says there is none and why); returns the HTML's path."""
+    from arproj.report.pdf import chromium, print_pdf
+
+    path = ctx.out / "report.html"
+    pdf = ctx.out / "report.pdf"
+    pdf.unlink(missing_ok=True)  # never an earlier run's PDF beside this report
+    browser = chromium()
+    if browser is None:
+        path.write_text(render_report(ctx, "no headless Chromium found (Debian: apt-get install chromium)"),
+                        encoding="utf-8")
+        return path
+    path.write_text(render_report(ctx), encoding="utf-8")
+    try:
+        print_pdf(path, pdf, browser)
+    except (RuntimeError, OSError, subprocess.TimeoutExpired) as err:
+        path.write_text(render_report(ctx, f"printing failed: {err}"), encoding="utf-8")
     return path

@@ -16,6 +16,9 @@ from geometry.poses import invert, transform_points
 TRUTH_COLOUR = (255, 255, 255)
 TRUTH_SHADOW = (0, 0, 0)
 DASH_PX = 10  # dash and gap length of the truth lines in the photograph
+# The caption says what draw_truth_on_photo draws: kept beside its colours so that the two cannot part.
+TRUTH_ON_PHOTO_TEXT = ("thin dashed lines, white with a black outline (crosses for screws and nails, the outlines "
+                       "of studs and plates closed)")
 
 
 def draw_truth_on_photo(image: NDArray[np.uint8], wall: Any, T_room_from_wall: NDArray[np.float64],
@@ -48,7 +51,7 @@ def draw_truth_on_photo(image: NDArray[np.uint8], wall: Any, T_room_from_wall: N
         drawn += 1
         if len(points) == 1:
             u, v = (round(float(c)) for c in uv[0])
-            for colour, thick in ((TRUTH_SHADOW, 3), (TRUTH_COLOUR, 1)):
+            for colour, thick in ((TRUTH_SHADOW, 4), (TRUTH_COLOUR, 2)):
                 cv2.drawMarker(out, (u, v), colour, cv2.MARKER_CROSS, 14, thick, cv2.LINE_AA)
             continue
         run = 0.0  # arc length along the projected line, for the dashes
@@ -59,8 +62,9 @@ def draw_truth_on_photo(image: NDArray[np.uint8], wall: Any, T_room_from_wall: N
             seg = float(np.linalg.norm(b - a))
             if (run // DASH_PX) % 2 == 0:
                 pa, pb = tuple(np.round(a).astype(int)), tuple(np.round(b).astype(int))
-                cv2.line(out, pa, pb, TRUTH_SHADOW, 3, cv2.LINE_AA)
-                cv2.line(out, pa, pb, TRUTH_COLOUR, 1, cv2.LINE_AA)
+                # white 2 px on black 4 px: a 1 px white line antialiased to grey read as a black mark
+                cv2.line(out, pa, pb, TRUTH_SHADOW, 4, cv2.LINE_AA)
+                cv2.line(out, pa, pb, TRUTH_COLOUR, 2, cv2.LINE_AA)
             run += seg
     return out, drawn
 
@@ -114,5 +118,72 @@ def calibration_figure(state: dict[str, Any], path: str | Path) -> Path:
         ax2.set_axis_off()
     out = Path(path)
     fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return out
+
+
+TRUTH_GREY = "#b8b8b8"
+MAP_VS_TRUTH_TEXT = ("The wall file's truth drawn wide in light grey, each object with its id; over it what the map "
+                     "found, thin, in its class colour (dots for fasteners). A red label marks a truth object the "
+                     "map missed or gave a wrong class, with the class it gave; an orange one a mapped object on "
+                     "nothing in the wall.")
+
+
+def map_vs_truth_figure(objects: list[Any], wall: Any, scores: list[Any], unmatched: list[Any],
+                        path: str | Path) -> Path:
+    """The map against the truth (PNG): wall objects wide and grey with their ids, mapped objects (MapObject:
+    cls, kind, points_m) thin in class colours, misses and wrong classes (scores: mapping.evaluate.ObjectScore)
+    labelled in red, unmatched mapped objects in orange. What it draws is MAP_VS_TRUTH_TEXT."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mapping.texture import CLASS_COLOURS
+
+    by_id = {s.id: s for s in scores}
+    aspect = wall.height_m / max(wall.width_m, 1e-9)
+    fig, ax = plt.subplots(figsize=(10, max(3.0, 10 * aspect) + 0.6), constrained_layout=True)
+    ax.add_patch(plt.Rectangle((0, 0), wall.width_m, wall.height_m, fill=False, ec="black", lw=1))
+    for obj in wall.objects:
+        g = np.asarray(obj.geometry_m, dtype=np.float64)
+        if obj.kind in ("stud", "beam", "plate", "cavity"):
+            g = np.vstack([g, g[:1]])
+        if len(g) == 1:
+            ax.plot(g[:, 0], g[:, 1], "o", color=TRUTH_GREY, ms=14, zorder=1)
+        else:
+            ax.plot(g[:, 0], g[:, 1], "-", color=TRUTH_GREY, lw=9, solid_capstyle="round", zorder=1)
+        score = by_id.get(obj.id)
+        bad = score is not None and score.verdict in ("missed", "wrong class")
+        text = obj.id if not bad else (f"{obj.id}: missed" if score.verdict == "missed" else
+                                       f"{obj.id}: mapped as {str(score.mapped_class).replace('_', ' ')}")
+        anchor = g[len(g) // 2] if len(g) > 2 else g.mean(axis=0)
+        ax.annotate(text, anchor, xytext=(4, 4), textcoords="offset points", fontsize=7,
+                    color="#c00000" if bad else "#555555", fontweight="bold" if bad else "normal", zorder=4)
+    used: set[str] = set()
+    for o in objects:
+        colour = np.array(CLASS_COLOURS.get(o.cls, CLASS_COLOURS["unknown"])) / 255.0
+        p = np.asarray(o.points_m, dtype=np.float64)
+        if o.kind == "outline":
+            p = np.vstack([p, p[:1]])
+        label = None if o.cls in used else o.cls.replace("_", " ")
+        used.add(o.cls)
+        if len(p) == 1:
+            ax.plot(p[:, 0], p[:, 1], "o", color=colour, ms=5, mec="black", mew=0.5, zorder=3, label=label)
+        else:
+            ax.plot(p[:, 0], p[:, 1], "-", color=colour, lw=1.8, zorder=3, label=label)
+    for o in unmatched:
+        p = np.asarray(o.points_m, dtype=np.float64)
+        ax.annotate(f"{o.cls.replace('_', ' ')} on nothing", p.mean(axis=0), xytext=(4, -10),
+                    textcoords="offset points", fontsize=7, color="#d07000", fontweight="bold", zorder=4)
+    ax.plot([], [], "-", color=TRUTH_GREY, lw=9, label="truth (wall file)")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, title="map", title_fontsize=8)
+    ax.set_xlim(-0.02 * wall.width_m, 1.02 * wall.width_m)
+    ax.set_ylim(-0.02 * wall.height_m, 1.02 * wall.height_m)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x along the wall [m]")
+    ax.set_ylabel("y up [m]")
+    out = Path(path)
+    fig.savefig(out, dpi=90, bbox_inches="tight")
     plt.close(fig)
     return out

@@ -30,18 +30,13 @@ from scanner.run import (
     simulated_site,
 )
 from scanner.sensor_model import SensorConfig
-from scanner.wall import Wall, load_wall, shipped_walls
+from scanner.wall import Wall, load_wall, wall_file
 
 
 def resolve_wall(wall: str | Path) -> tuple[Wall, Path]:
     """The wall file, or a shipped wall by its name (e.g. `paper_test_plate`), loaded and checked; returns the
     wall and its path as found. InputError names what is wrong."""
-    path = Path(wall)
-    if not path.exists() and path.parent == Path() and path.stem in shipped_walls():
-        path = shipped_walls()[path.stem]
-    if not path.exists():
-        raise InputError(f"--wall {wall}: no such file",
-                         f"pass a wall file (YAML) or a shipped wall: {', '.join(sorted(shipped_walls()))}")
+    path = wall_file(wall)
     return load_wall(path), path
 
 

@@ -73,3 +73,33 @@ def test_pipes_labelled_wood(wall):
     water_as_stud = MapObject("outline", np.array([[0.78, 0.0], [0.82, 0.0], [0.82, 0.4], [0.78, 0.4]]), 0.04,
                               cls="non_metal")
     assert pipes_labelled_wood([*honest[:2], water_as_stud], wall) == ["water"]
+
+
+def test_every_object_is_scored_and_a_screw_mapped_as_a_power_line_is_a_wrong_class() -> None:
+    """object_scores lists every class of the wall: fasteners, studs, a dry plastic pipe (invisible), and calls
+    a find of another class a wrong class, not a find."""
+    from mapping.evaluate import class_summary, object_scores, unmatched_objects
+
+    wall = wall_from_dict({"format": "arproj-wall/1", "name": "all", "width_m": 1.0, "height_m": 1.0,
+                           "material": "drywall", "objects": [
+                               {"kind": "cable", "id": "cable", "points_m": CABLE, "depth_m": 0.02},
+                               {"kind": "screw", "id": "screw", "points_m": [[0.7, 0.8]], "depth_m": 0.01},
+                               {"kind": "nail", "id": "nail", "points_m": [[0.1, 0.1]], "depth_m": 0.01},
+                               {"kind": "stud", "id": "stud", "outline_m": [[0.45, 0.0], [0.5, 0.0], [0.5, 1.0],
+                                                                           [0.45, 1.0]], "material": "wood",
+                                "depth_m": 0.01},
+                               {"kind": "pipe", "id": "dry", "points_m": [[0.0, 0.3], [1.0, 0.3]],
+                                "depth_m": 0.02, "material": "plastic", "diameter_m": 0.02,
+                                "water_filled": False}]}, "test")
+    objects = [MapObject("line", _line(CABLE), 0.008, cls="power_line"),
+               MapObject("line", np.array([[0.68, 0.8], [0.72, 0.8]]), 0.008, cls="power_line"),
+               MapObject("line", np.array([[0.475, 0.05], [0.475, 0.95]]), 0.05, cls="non_metal"),
+               MapObject("point", np.array([[0.9, 0.9]]), 0.004, cls="fastener")]
+    scores = {s.id: s for s in object_scores(objects, wall)}
+    assert (scores["cable"].verdict, scores["cable"].mapped_class) == ("found", "power_line")
+    assert (scores["screw"].verdict, scores["screw"].mapped_class) == ("wrong class", "power_line")
+    assert scores["nail"].verdict == "missed" and scores["stud"].verdict == "found"
+    assert scores["dry"].verdict == "invisible"
+    summary = class_summary(list(scores.values()))
+    assert summary["fastener"] == {"objects": 2, "found": 0, "wrong class": 1, "missed": 1, "invisible": 0}
+    assert [o.cls for o in unmatched_objects(objects, wall)] == ["fastener"]  # the one at (0.9, 0.9)

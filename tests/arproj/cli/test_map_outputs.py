@@ -119,3 +119,10 @@ def test_kill_9_at_any_moment_of_writing_leaves_the_old_or_the_new_map(maps: dic
     assert _content(out) == new and [p.name for p in tmp_path.iterdir()] == ["map"]
     print(f"kill -9 outcomes: {outcomes}")
     assert "old" in outcomes  # the kills came while writing, not only after the swap
+
+
+def test_a_shipped_wall_name_is_the_truth_of_wall(maps: dict[str, Path], tmp_path: Path) -> None:
+    done = CliRunner().invoke(app, ["map", str(maps["log"]), "--out", str(tmp_path / "map"), "--wall",
+                                    "small_test_wall"])
+    assert done.exit_code == 0, done.output
+    assert "against small_test_wall: recall 100.0% (2/2)" in done.output

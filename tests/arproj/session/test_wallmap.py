@@ -50,6 +50,8 @@ def test_glb_objects_and_coverage_load_and_judge_points(tmp_path):
     assert overlays.check_drill_point(wm, np.array([1.5, 0.7]), 0.001).verdict == overlays.VERDICT_KEEP_AWAY
     unscanned = overlays.check_drill_point(wm, np.array([0.5, 0.7]), 0.001)
     assert unscanned.verdict == overlays.VERDICT_UNKNOWN and "not scanned" in unscanned.reason
+    outside = overlays.check_drill_point(wm, np.array([7.0, 7.0]), 0.001)  # `arproj project --drill 7,7`
+    assert outside.verdict == overlays.VERDICT_UNKNOWN and outside.reason == "outside the wall"
 
 
 def test_a_map_folder_without_its_coverage_layer_is_refused(tmp_path):
@@ -89,6 +91,7 @@ def test_bad_objects_json_names_the_problem(tmp_path, doc, message):
 
 def test_truth_map_from_a_wall_file_uses_the_mapping_classes():
     wm = wall_map_from_wall_file(shipped_walls()["paper_test_plate"])
+    assert overlays.check_drill_point(wm, np.array([7.0, 7.0]), 0.001).reason == "outside the wall"
     kinds = {o.cls for o in wm.objects}
     assert "power_line" in kinds and "metal_pipe" in kinds
     assert all(o.width_m > 0 for o in wm.objects if o.cls in ("power_line", "metal_pipe"))

@@ -1,0 +1,76 @@
+"""The command line answers at once (issue 23 item 4): `arproj --help` imports none of the heavy libraries (they
+are imported where they are used), an unquoted glob's extra arguments get a hint, and shipped wall names are
+accepted by every --wall/--truth and checked before any work."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from arproj.bench.cli import heavy_modules_loaded
+from arproj.cli import app, glob_hint
+from geometry.errors import InputError
+from scanner.wall import shipped_walls, wall_file
+
+
+def test_help_and_version_import_no_heavy_module() -> None:
+    assert heavy_modules_loaded(["--help"]) == []
+    assert heavy_modules_loaded(["--version"]) == []
+
+
+def test_the_probe_sees_a_heavy_import() -> None:
+    """The check above can fail: a module that imports OpenCV, run through the same probe, shows it."""
+    code = ("import sys, json; from arproj.bench.cli import HEAVY_MODULES; import cv2; "
+            "print(json.dumps(sorted({m.split('.')[0] for m in sys.modules} & set(HEAVY_MODULES))))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert "cv2" in json.loads(done.stdout)
+
+
+def test_extra_arguments_that_are_files_get_the_glob_hint(tmp_path: Path) -> None:
+    names = [tmp_path / f"left{i}.jpg" for i in range(3)]
+    for name in names:
+        name.write_bytes(b"")
+    done = CliRunner().invoke(app, ["calibrate", "stereo", "--left", str(names[0]), str(names[1]), str(names[2]),
+                                    "--right", "x", "--out", str(tmp_path / "rig")])
+    assert done.exit_code == 2
+    assert "unquoted glob" in done.output and "quote the glob" in done.output
+    assert not (tmp_path / "rig").exists()
+
+
+def test_extra_arguments_that_are_not_files_keep_typers_message() -> None:
+    message = "Got unexpected extra argument(s) (no-such-file another)"
+    assert glob_hint(message) == message
+    assert glob_hint("Missing option '--out'.") == "Missing option '--out'."
+
+
+def test_shipped_wall_names_resolve_and_unknown_ones_name_them(tmp_path: Path) -> None:
+    assert wall_file("small_test_wall") == shipped_walls()["small_test_wall"]
+    own = tmp_path / "w.yaml"
+    own.write_text("")
+    assert wall_file(own) == own
+    with pytest.raises(InputError, match=r"--truth nowall: no such file.*small_test_wall"):
+        wall_file("nowall", "--truth")
+
+
+@pytest.mark.parametrize("args", [["map", "LOG", "--wall", "nowall"], ["project", "--truth", "nowall", "--sim"]])
+def test_an_unknown_wall_is_refused_before_any_work(tmp_path: Path, args: list[str],
+                                                   monkeypatch: pytest.MonkeyPatch,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """Refused with exit 2 before the log is read (it does not exist here) or the simulated site is built."""
+    from arproj.cli import main
+
+    out = tmp_path / "map"
+    args = [str(tmp_path / "missing.db") if a == "LOG" else a for a in args]
+    if args[0] == "map":
+        args += ["--out", str(out)]
+    monkeypatch.setattr(sys, "argv", ["arproj", *args])
+    with pytest.raises(SystemExit) as done:
+        main()
+    assert done.value.code == 2
+    assert "nowall: no such file" in capsys.readouterr().err
+    assert not out.exists()
