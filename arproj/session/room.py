@@ -318,6 +318,8 @@ class RoomSession:
         bound = max(v.decision.bound_m for v in shown.values())
         lines = [f"registered: ±{bound * 1000:.1f} mm (95 %) on wall " + ", ".join(
             str(self.walls[k].index) for k in shown)]
+        if any(r.zone_texels for r in rasters.values()):
+            lines.append(f"hatched: {tol.DIN_ZONE_WORDS} (not scanned)")
         hidden = [self.walls[k].index for k in self.verdicts if k not in shown]
         if hidden:
             lines.append("not checked, left dark: wall " + ", ".join(str(i) for i in hidden))

@@ -380,6 +380,9 @@ class ProjectionSession:
         lines = [f"registered: ±{decision.bound_m * 1000:.1f} mm (95 %)"]
         if clip is not None:
             lines.append(f"map limited to the well-registered {100 * trusted.share:.0f} % (outlined)")
+        raster = self.map_projector.raster
+        if raster is not None and raster.zone_texels:
+            lines.append(f"hatched: {tol.DIN_ZONE_WORDS} (not scanned)")
         if self.drill_xy is not None:
             lines.append(f"drill: {self.drill_check(self.drill_xy).message}")
         self.last_words = slipped + lines  # the slip first: it is what the craftsman must act on
