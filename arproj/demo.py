@@ -469,7 +469,7 @@ def stage_prewarp(ctx: DemoContext) -> None:
                 figures["registration error p95 mm"] = float(1000 * np.percentile(errors, 95))
                 figures["registration error max mm"] = float(1000 * errors.max())
         figures["projector pixel footprint mm"] = 1000 * reg.footprint_m
-    raster = session.map_projector.raster
+    raster = session.map_projector.map_raster  # the map's (the truth check drew marks after it)
     if decision.show_map and raster is not None:
         figures["DIN zones drawn where not scanned m²"] = raster.zone_texels / raster.px_per_m ** 2
         figures["DIN zone labels ('" + DIN_ZONE_WORDS + "')"] = raster.zone_labels
