@@ -30,6 +30,7 @@ from mapping.evidence import Coverage
 from mapping.grid import GridInfo
 from mapping.mapfile import FILE_NAME as OBJECTS_FILE
 from mapping.mapfile import MAP_CLASSES, OUTLINE_CLASSES, MappedObject, check_objects_within, read_objects
+from scanner.priors import room_heights
 
 MAX_GLB_BYTES = 1 << 30  # a wall's textured mesh is tens of MB
 MAX_WALL_M = 100.0       # a wall map's vertices, metres from the wall frame's origin
@@ -219,4 +220,8 @@ def wall_map_from_wall(wall: object, source: str = "wall truth") -> WallMap:
     w, h = wall.width_m, wall.height_m  # type: ignore[attr-defined]
     # The truth is known everywhere: what a complete, perfect scan would have covered.
     coverage = Coverage.complete(GridInfo.covering(0.0, 0.0, w, h, tol.TRUTH_COVERAGE_CELL_M), bounds=(0.0, 0.0, w, h))
-    return WallMap(plane_mesh(0.0, 0.0, w, h), objects, coverage=coverage, source=source)
+    # its room as the scan's priors take it: floor and ceiling from the wall file or the survey, its ends the corners
+    floor, ceiling, origin = room_heights(wall)  # type: ignore[arg-type]
+    room = WallRoom(floor, ceiling, (0.0, float(w)), opening_boxes(wall.openings),  # type: ignore[attr-defined]
+                    np.asarray(wall.sockets, dtype=np.float64).reshape(-1, 2), f"{origin}")  # type: ignore[attr-defined]
+    return WallMap(plane_mesh(0.0, 0.0, w, h), objects, coverage=coverage, source=source, room=room)
