@@ -66,6 +66,24 @@ def separated_passes(points_px: NDArray[np.float64], radii_px: NDArray[np.float6
     return passes
 
 
+def _marks_in_view(T_wall_from_projector: NDArray[np.float64], intr: object, marks_xy: NDArray[np.float64]
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The marks (k, 2) the projector at T_wall_from_projector shows, their projector pixels (k, 2) and radii
+    (metres, projector pixels): at least MARK_RADIUS_PX pixels, and MIN_MARK_RADIUS_M."""
+    marks_xy = np.asarray(marks_xy, dtype=np.float64).reshape(-1, 2)
+    p = transform_points(invert(T_wall_from_projector), np.column_stack([marks_xy, np.zeros(len(marks_xy))]))
+    predicted, inside = registration.project_in_view(intr, p)  # type: ignore[arg-type]
+    marks_xy, predicted = marks_xy[inside], predicted[inside]
+    step = registration.rays_to_wall(T_wall_from_projector, intr,  # type: ignore[arg-type]
+                                     np.concatenate([predicted, predicted + np.array([1.0, 0.0]),
+                                                     predicted + np.array([0.0, 1.0])]))[:, :2]
+    n = len(predicted)
+    footprint = np.maximum(np.linalg.norm(step[n:2 * n] - step[:n], axis=1),
+                           np.linalg.norm(step[2 * n:] - step[:n], axis=1))
+    radius_m = np.maximum(MIN_MARK_RADIUS_M, MARK_RADIUS_PX * footprint)
+    return marks_xy, predicted, radius_m, radius_m / footprint
+
+
 def true_landing_errors(session: object, site: SiteTruth, marks_xy: NDArray[np.float64],
                         wall_index: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Render marks at marks_xy (n, 2) with the session's current pose — each a disc of at least
@@ -77,18 +95,7 @@ def true_landing_errors(session: object, site: SiteTruth, marks_xy: NDArray[np.f
     """
     reg = session.registration  # type: ignore[attr-defined]
     intr = session.projector_intr  # type: ignore[attr-defined]
-    marks_xy = np.asarray(marks_xy, dtype=np.float64)
-    p = transform_points(invert(reg.T_wall_from_projector), np.column_stack([marks_xy, np.zeros(len(marks_xy))]))
-    predicted, inside = registration.project_in_view(intr, p)
-    marks_xy, predicted = marks_xy[inside], predicted[inside]
-    step = registration.rays_to_wall(reg.T_wall_from_projector, intr,
-                                     np.concatenate([predicted, predicted + np.array([1.0, 0.0]),
-                                                     predicted + np.array([0.0, 1.0])]))[:, :2]
-    n = len(predicted)
-    footprint = np.maximum(np.linalg.norm(step[n:2 * n] - step[:n], axis=1),
-                           np.linalg.norm(step[2 * n:] - step[:n], axis=1))
-    radius_m = np.maximum(MIN_MARK_RADIUS_M, MARK_RADIUS_PX * footprint)
-    radius_px = radius_m / footprint
+    marks_xy, predicted, radius_m, radius_px = _marks_in_view(reg.T_wall_from_projector, intr, marks_xy)
     mp = session.map_projector  # type: ignore[attr-defined]
     errors, pixels = [], []
     for idx in separated_passes(predicted, radius_px):
@@ -119,18 +126,7 @@ def room_landing_errors(room_session: object, site: SiteTruth, k: int, marks_xy:
     intr = rs.projector_intr
     T_room_from_projector = rs.T_room_from_projector
     assert T_room_from_projector is not None
-    marks_xy = np.asarray(marks_xy, dtype=np.float64).reshape(-1, 2)
-    p = transform_points(invert(verdict.T_wall_from_projector), np.column_stack([marks_xy, np.zeros(len(marks_xy))]))
-    predicted, inside = registration.project_in_view(intr, p)
-    marks_xy, predicted = marks_xy[inside], predicted[inside]
-    step = registration.rays_to_wall(verdict.T_wall_from_projector, intr,
-                                     np.concatenate([predicted, predicted + np.array([1.0, 0.0]),
-                                                     predicted + np.array([0.0, 1.0])]))[:, :2]
-    n = len(predicted)
-    footprint = np.maximum(np.linalg.norm(step[n:2 * n] - step[:n], axis=1),
-                           np.linalg.norm(step[2 * n:] - step[:n], axis=1))
-    radius_m = np.maximum(MIN_MARK_RADIUS_M, MARK_RADIUS_PX * footprint)
-    radius_px = radius_m / footprint
+    marks_xy, predicted, radius_m, radius_px = _marks_in_view(verdict.T_wall_from_projector, intr, marks_xy)
     errors: list[NDArray[np.float64]] = []
     wrong = 0
     for idx in separated_passes(predicted, radius_px):
