@@ -33,6 +33,7 @@ import cv2
 import numpy as np
 
 from arproj.console import console, err_console, progress_bar
+from arproj.session.tolerances import DIN_ZONE_WORDS
 from geometry.errors import InputError
 from geometry.plain import plain
 from geometry.poses import invert, look_at, rotation_angle_deg, transform_points
@@ -151,7 +152,7 @@ class DemoContext:
             from arproj.session.output import MemoryOutput
             from arproj.session.robot_io import SimulatedRobot
             from arproj.session.session import ProjectionSession
-            from arproj.session.wallmap import load_wall_map
+            from arproj.session.wallmap import load_wall_map, wall_room_in_room
             from geometry.rig import Rig
 
             site = self.site()
@@ -162,6 +163,11 @@ class DemoContext:
             else:
                 rig = Rig.load(self.out / "rig")
             wall_map = load_wall_map(self.out / "map" / "wall.glb")
+            # the DIN zones from the room the wall stands in (floor, ceiling, corners) and the wall file's doors,
+            # windows and sockets; the map's frame is room wall 0's (stage_mesh)
+            wall_map.room = wall_room_in_room(site.walls[0].T_room_from_wall, site.room.corners, site.room.height_m,
+                                              0, self.wall.openings, self.wall.sockets,
+                                              "the site's room, the wall file's openings and sockets")
             self._robot = SimulatedRobot.on_site(site, 0, MemoryOutput(), seed=self.options.seed)
             self._session = ProjectionSession(rig, wall_map, self._robot)
             self._session.aim_at(self.aim_point())
@@ -483,9 +489,15 @@ def stage_prewarp(ctx: DemoContext) -> None:
                 figures["registration error p95 mm"] = float(1000 * np.percentile(errors, 95))
                 figures["registration error max mm"] = float(1000 * errors.max())
         figures["projector pixel footprint mm"] = 1000 * reg.footprint_m
+    raster = session.map_projector.map_raster  # the map's (the truth check drew marks after it)
+    if decision.show_map and raster is not None:
+        figures["DIN zones drawn where not scanned m²"] = raster.zone_texels / raster.px_per_m ** 2
+        figures["DIN zone labels ('" + DIN_ZONE_WORDS + "')"] = raster.zone_labels
     ctx.figures["pre-warp"] = figures
     ctx.picture("prewarped_frame.png", f"The frame the beamer shows ({frame.shape[1]}×{frame.shape[0]}): the map "
-                "pre-warped for the oblique wall and the lens, with legend and registration status.", "pre-warp")
+                "pre-warped for the oblique wall and the lens, with legend and registration status; hatched and "
+                f"labelled '{DIN_ZONE_WORDS}': the DIN 18015-3 installation zones of the room (floor, ceiling, "
+                "corners, doors, windows, sockets) where the wall was not scanned — unknown, never safe.", "pre-warp")
 
 
 def stage_photograph(ctx: DemoContext) -> None:

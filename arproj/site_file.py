@@ -47,7 +47,7 @@ from geometry.errors import InputError
 from geometry.inputs import fail, float_array, load_document, number, text
 from geometry.poses import invert, make_pose
 from scanner.laser import ROOM_KEYS, LaserConfig
-from scanner.wall import Wall
+from scanner.wall import Opening, Wall, _parse_openings, _parse_sockets
 from wallpose.pose import RoomMap, wall_frames
 
 FORMAT = "arproj-site/1"
@@ -85,6 +85,8 @@ class SiteWall:
     map_dir: Path
     scan_log: Path
     measured: dict[str, RoomSize] = field(default_factory=dict)
+    openings: list[Opening] = field(default_factory=list)  # the wall's doors and windows (its wall frame)
+    sockets: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2)))  # known socket centres
 
     def room_map(self) -> RoomMap:
         """The room's walls as the full wall-pose estimate takes them."""
@@ -109,6 +111,8 @@ class SiteWall:
                      "measured": {k: {"value_m": s.value_m, "sigma_m": s.sigma_m, "frames": s.frames}
                                   for k, s in self.measured.items()}},
             "laser": {"side_margin_m": self.side_margin_m, "floor_margin_m": self.floor_margin_m},
+            **({"openings": [o.to_dict() for o in self.openings]} if self.openings else {}),
+            **({"sockets": [[float(v) for v in p] for p in self.sockets]} if len(self.sockets) else {}),
         }
 
 
@@ -185,7 +189,7 @@ def site_wall_from_scan(key: str, wall: Wall, rooms: list[dict[str, float]], fra
                          "the room", "scan with the 2-D laser (--laser URL, or --sim) to write a site file")
     return SiteWall(key, wall.name, wall.width_m, wall.height_m, wall.fingerprint(), T, along, height, corners,
                     measured["height"].value_m, index, cfg.side_margin_m, cfg.floor_margin_m, Path(map_dir),
-                    Path(scan_log), measured)
+                    Path(scan_log), measured, list(wall.openings), np.asarray(wall.sockets, dtype=np.float64))
 
 
 # -- reading ---------------------------------------------------------------------------------------------------
@@ -277,11 +281,16 @@ def _read_wall(path: Path, key: str, entry: Any) -> SiteWall:
         measured[name] = RoomSize(f.number(f"{at}.value_m", positive=True), sigma,
                                   int(f.number(f"{at}.frames", non_negative=True)))
     folder = path.parent
+    # doors, windows and sockets (optional; the DIN zones are drawn beside them), read as the wall file reads them
+    where = f"{path}: walls.{key}"
+    openings = _parse_openings(where, entry.get("openings"), width, height)
+    sockets = _parse_sockets(where, entry.get("sockets"), width, height)
     return SiteWall(key, f.text("wall.name"), width, height, f.text("wall.fingerprint"), T,
                     f.number("wall_in_room_sigma_m.along", non_negative=True),
                     f.number("wall_in_room_sigma_m.height", non_negative=True), corners, room_height, index,
                     f.number("laser.side_margin_m", non_negative=True), f.number("laser.floor_margin_m"),
-                    (folder / f.text("map")).resolve(), (folder / f.text("scan_log")).resolve(), measured)
+                    (folder / f.text("map")).resolve(), (folder / f.text("scan_log")).resolve(), measured,
+                    openings, sockets)
 
 
 def read_site(path: str | Path) -> dict[str, SiteWall]:

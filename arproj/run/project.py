@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from arproj.session import registration
 from arproj.session.output import BeamerWindow, FileOutput, MemoryOutput, ScreenStream
-from arproj.session.wallmap import WallMap, load_wall_map, wall_map_from_wall_file
+from arproj.session.wallmap import WallMap, load_wall_map, wall_map_from_wall_file, wall_room_in_room
 from arproj.site_file import SiteWall, read_site_wall, simulated_projection_scene
 from devices.errors import DeviceError
 from devices.pelco_d import PanTiltHead
@@ -83,7 +83,12 @@ def load_map(options: SessionOptions, site_wall: SiteWall | None = None) -> Wall
             raise InputError(f"--site: wall {site_wall.key!r}'s map {glb} does not exist",
                              f"map the scan first: `arproj map {site_wall.scan_log} --out {site_wall.map_dir}`, "
                              "or pass --map")
-        return load_wall_map(glb, options.objects)
+        wall_map = load_wall_map(glb, options.objects)
+        # the DIN zones from the site's room: its floor, ceiling and corners, the wall's doors, windows, sockets
+        wall_map.room = wall_room_in_room(site_wall.T_room_from_wall, site_wall.corners_m, site_wall.room_height_m,
+                                          site_wall.wall_index, site_wall.openings, site_wall.sockets,
+                                          f"site file, wall {site_wall.key!r}")
+        return wall_map
     raise InputError("no map given", "pass --map WALL.glb (from `arproj map`) or --truth WALL.yaml")
 
 

@@ -66,6 +66,24 @@ def separated_passes(points_px: NDArray[np.float64], radii_px: NDArray[np.float6
     return passes
 
 
+def _marks_in_view(T_wall_from_projector: NDArray[np.float64], intr: object, marks_xy: NDArray[np.float64]
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The marks (k, 2) the projector at T_wall_from_projector shows, their projector pixels (k, 2) and radii
+    (metres, projector pixels): at least MARK_RADIUS_PX pixels, and MIN_MARK_RADIUS_M."""
+    marks_xy = np.asarray(marks_xy, dtype=np.float64).reshape(-1, 2)
+    p = transform_points(invert(T_wall_from_projector), np.column_stack([marks_xy, np.zeros(len(marks_xy))]))
+    predicted, inside = registration.project_in_view(intr, p)  # type: ignore[arg-type]
+    marks_xy, predicted = marks_xy[inside], predicted[inside]
+    step = registration.rays_to_wall(T_wall_from_projector, intr,  # type: ignore[arg-type]
+                                     np.concatenate([predicted, predicted + np.array([1.0, 0.0]),
+                                                     predicted + np.array([0.0, 1.0])]))[:, :2]
+    n = len(predicted)
+    footprint = np.maximum(np.linalg.norm(step[n:2 * n] - step[:n], axis=1),
+                           np.linalg.norm(step[2 * n:] - step[:n], axis=1))
+    radius_m = np.maximum(MIN_MARK_RADIUS_M, MARK_RADIUS_PX * footprint)
+    return marks_xy, predicted, radius_m, radius_m / footprint
+
+
 def true_landing_errors(session: object, site: SiteTruth, marks_xy: NDArray[np.float64],
                         wall_index: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Render marks at marks_xy (n, 2) with the session's current pose — each a disc of at least
@@ -77,18 +95,7 @@ def true_landing_errors(session: object, site: SiteTruth, marks_xy: NDArray[np.f
     """
     reg = session.registration  # type: ignore[attr-defined]
     intr = session.projector_intr  # type: ignore[attr-defined]
-    marks_xy = np.asarray(marks_xy, dtype=np.float64)
-    p = transform_points(invert(reg.T_wall_from_projector), np.column_stack([marks_xy, np.zeros(len(marks_xy))]))
-    predicted, inside = registration.project_in_view(intr, p)
-    marks_xy, predicted = marks_xy[inside], predicted[inside]
-    step = registration.rays_to_wall(reg.T_wall_from_projector, intr,
-                                     np.concatenate([predicted, predicted + np.array([1.0, 0.0]),
-                                                     predicted + np.array([0.0, 1.0])]))[:, :2]
-    n = len(predicted)
-    footprint = np.maximum(np.linalg.norm(step[n:2 * n] - step[:n], axis=1),
-                           np.linalg.norm(step[2 * n:] - step[:n], axis=1))
-    radius_m = np.maximum(MIN_MARK_RADIUS_M, MARK_RADIUS_PX * footprint)
-    radius_px = radius_m / footprint
+    marks_xy, predicted, radius_m, radius_px = _marks_in_view(reg.T_wall_from_projector, intr, marks_xy)
     mp = session.map_projector  # type: ignore[attr-defined]
     errors, pixels = [], []
     for idx in separated_passes(predicted, radius_px):
@@ -102,3 +109,41 @@ def true_landing_errors(session: object, site: SiteTruth, marks_xy: NDArray[np.f
         errors.append(np.linalg.norm(landed - marks_xy[idx][ok][on_wall], axis=1))
         pixels.append(found[ok][on_wall])
     return np.concatenate(errors), np.concatenate(pixels)
+
+
+def room_landing_errors(room_session: object, site: SiteTruth, k: int, marks_xy: NDArray[np.float64]
+                        ) -> tuple[NDArray[np.float64], int]:
+    """true_landing_errors for wall k of a RoomSession (arproj.session.room): the marks rendered on that wall
+    alone with its correction, their centroids ray-cast with the site's truth. Returns (errors (m,) metres of
+    the marks found — a mark that lands on another surface counts with its distance in the room —, how many
+    landed on another surface than wall k)."""
+    from arproj.session.projection import check_mark_raster
+    from arproj.session.room import RoomSession
+
+    assert isinstance(room_session, RoomSession)
+    rs, w = room_session, room_session.walls[k]
+    verdict = rs.verdicts[k]
+    intr = rs.projector_intr
+    T_room_from_projector = rs.T_room_from_projector
+    assert T_room_from_projector is not None
+    marks_xy, predicted, radius_m, radius_px = _marks_in_view(verdict.T_wall_from_projector, intr, marks_xy)
+    errors: list[NDArray[np.float64]] = []
+    wrong = 0
+    for idx in separated_passes(predicted, radius_px):
+        raster = check_mark_raster(w.wall_map, marks_xy[idx], radius_m[idx])
+        rs.room_projector.show(("truth", k, marks_xy[idx].round(5).tobytes()), {k: raster},
+                               {k: verdict.correction_xy})
+        frame = rs.room_projector.render(T_room_from_projector)
+        found = registration.find_marks(frame, predicted[idx], radius_px[idx])
+        ok = np.all(np.isfinite(found), axis=1)
+        truth = site.raycast("projector", found[ok])
+        on_wall = np.asarray(truth.wall_index) == w.index
+        landed = np.asarray(truth.wall_xy, dtype=np.float64)
+        wanted = marks_xy[idx][ok]
+        e = np.linalg.norm(landed - wanted, axis=1)
+        room = transform_points(w.T_room_from_wall, np.column_stack([wanted, np.zeros(len(wanted))]))
+        e[~on_wall] = np.linalg.norm(np.asarray(truth.points_room, dtype=np.float64)[~on_wall] - room[~on_wall],
+                                     axis=1)
+        errors.append(np.nan_to_num(e, nan=np.inf))
+        wrong += int((~on_wall).sum())
+    return (np.concatenate(errors) if errors else np.zeros(0)), wrong

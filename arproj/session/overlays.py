@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from arproj.session import tolerances as tol
-from arproj.session.wallmap import WallMap
+from arproj.session.wallmap import WallMap, WallRoom
 from mapping import drill
 from mapping.drill import DrillVerdict, band_half_width_m, distance_to_object_m, safety_margin_m
 from mapping.mapfile import MappedObject
@@ -73,6 +73,62 @@ def din_zones(x0: float, y0: float, x1: float, y1: float, openings: list[tuple[f
     return zones
 
 
+def room_zones(room: WallRoom) -> list[tuple[float, float, float, float]]:
+    """The DIN 18015-3 zones (x0, y0, x1, y1) of a wall from its room: floor, ceiling and the room's corners
+    (not the map's extent), its doors and windows, and a vertical strip through each known socket (its lines
+    run vertically to it)."""
+    x0, x1 = room.corner_x_m
+    zones = din_zones(x0, room.floor_y_m, x1, room.ceiling_y_m, [o[1:] for o in room.openings])
+    half = tol.DIN_SOCKET_HALF_WIDTH_M
+    zones += [(float(sx) - half, room.floor_y_m, float(sx) + half, room.ceiling_y_m) for sx, _ in room.sockets]
+    return zones
+
+
+def zone_rects(wall_map: WallMap) -> list[tuple[float, float, float, float]]:
+    """The DIN zones (x0, y0, x1, y1) of a map: its room's when it knows its room, else (nothing better known)
+    the map's extent standing in for the room."""
+    return room_zones(wall_map.room) if wall_map.room is not None else din_zones(*wall_map.extent)
+
+
+def zone_mask(wall_map: WallMap, raster: WallRaster) -> NDArray[np.bool_]:
+    """(h, w) True on the raster's texels inside a DIN zone (zone_rects) where the wall was not scanned."""
+    h, w = raster.image.shape[:2]
+    mask = np.zeros((h, w), dtype=np.uint8)
+    for zx0, zy0, zx1, zy1 in zone_rects(wall_map):
+        (c0, r0), (c1, r1) = raster.to_px(np.array([[zx0, zy1], [zx1, zy0]]))
+        cv2.rectangle(mask, (round(c0), round(r0)), (round(c1), round(r1)), 1, -1)
+    return mask.astype(bool) & ~scanned_mask(wall_map, raster)
+
+
+def _label_zones(img: NDArray[np.uint8], zone: NDArray[np.bool_], raster: WallRaster,
+                 rects: list[tuple[float, float, float, float]]) -> int:
+    """Write DIN_ZONE_WORDS along each horizontal zone where a stretch of it wide enough is unscanned (vertical
+    strips keep only the hatch); returns how many were written."""
+    scale = max(0.4, 0.045 * raster.px_per_m / 22.0)  # letters ~4.5 cm high on the wall (Hershey: 22 px at scale 1)
+    thickness = max(1, round(scale * 1.5))
+    (tw, th), _ = cv2.getTextSize(tol.DIN_ZONE_WORDS, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness)
+    h, w = zone.shape
+    written = 0
+    for zx0, zy0, zx1, zy1 in rects:
+        if zx1 - zx0 <= zy1 - zy0:
+            continue
+        (c0, r0), (c1, r1) = raster.to_px(np.array([[zx0, zy1], [zx1, zy0]]))
+        r0, r1 = max(r0, 0.0), min(r1, h - 1.0)  # the part of the zone on the map
+        cy = round(0.5 * (r0 + r1) + 0.5 * th)
+        if r1 - r0 < th + 4 or not th <= cy < h:
+            continue
+        x = max(0, round(c0) + 4)
+        while x + tw < min(w, round(c1)):
+            if zone[cy - th:cy + 1, x:x + tw].all():
+                cv2.putText(img, tol.DIN_ZONE_WORDS, (x, cy), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255, 255),
+                            thickness, cv2.LINE_AA)
+                written += 1
+                x += 3 * tw
+            else:
+                x += max(1, tw // 4)
+    return written
+
+
 # -- wall raster ----------------------------------------------------------------------------------------------
 @dataclass
 class WallRaster:
@@ -82,6 +138,8 @@ class WallRaster:
     x0: float
     y1: float
     px_per_m: float
+    zone_texels: int = 0  # texels drawn as a DIN zone (unscanned), and the zones' labels written
+    zone_labels: int = 0
 
     @property
     def width_m(self) -> float:
@@ -172,13 +230,11 @@ def draw_map(wall_map: WallMap, registration_sigma_m: float, drill_xy: NDArray[n
         img[..., :3] = (img[..., :3] * (1.0 - alpha) + sampled[..., :3] * alpha).astype(np.uint8)
         img[..., 3][sampled[..., 3] > 0] = 255
     if show_zones:
-        unscanned = ~scanned_mask(wall_map, raster)
-        zone_mask = np.zeros((h, w), dtype=np.uint8)
-        for zx0, zy0, zx1, zy1 in din_zones(*wall_map.extent):
-            (c0, r0), (c1, r1) = raster.to_px(np.array([[zx0, zy1], [zx1, zy0]]))
-            cv2.rectangle(zone_mask, (round(c0), round(r0)), (round(c1), round(r1)), 1, -1)
-        zone = zone_mask.astype(bool) & unscanned & _hatch((h, w), max(4, int(0.04 * s)))
-        _blend(img, np.full((h, w, 3), 255, np.uint8), zone, tol.DIN_ZONE_OPACITY)
+        zones = zone_mask(wall_map, raster)
+        _blend(img, np.full((h, w, 3), 255, np.uint8), zones & _hatch((h, w), max(4, int(0.04 * s))),
+               tol.DIN_ZONE_OPACITY)
+        raster.zone_labels = _label_zones(img, zones, raster, zone_rects(wall_map))
+        raster.zone_texels = int(zones.sum())
     for kind in DRAW_ORDER:
         for obj in (o for o in wall_map.objects if o.cls == kind):
             _draw_object(img, raster, obj, registration_sigma_m)

@@ -70,6 +70,11 @@ class MapProjector:
         """The wall raster of what render() draws now (the map's or the check marks')."""
         return self._rasters[self._active]
 
+    @property
+    def map_raster(self) -> overlays.WallRaster | None:
+        """The wall raster of the map as last drawn (None: not drawn yet), whatever render() draws now."""
+        return self._rasters["map"]
+
     def __enter__(self) -> MapProjector:
         return self
 

@@ -107,20 +107,23 @@ def pixel_footprint_m(T_wall_from_projector: NDArray[np.float64], projector: Int
 def local_registration_sigma_m(centre_distance_95_m: float, normal_95_deg: float,
                                T_wall_from_projector: NDArray[np.float64], points_xy: NDArray[np.float64],
                                centre_xy: NDArray[np.float64], in_plane_sigma_m: float, footprint_m: float,
-                               calibration_px: float, roll_sigma_rad: float = 0.0) -> NDArray[np.float64]:
+                               calibration_px: float, roll_sigma_rad: float = 0.0,
+                               lever_m: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """1σ registration error on the wall (metres) at each drawn point points_xy (n, 2).
 
     A plane offset δd slides a point's landing along the wall by δd·tan(i), i the local incidence of the
     projector's ray there; a tilt δθ about the pattern's centre lifts a point r away by r·δθ, which slides by
     r·δθ·tan(i); a rotation about the normal moves it by r·δφ; plus the in-plane position's σ and the
     calibration's residual (projector pixels × footprint). On an
-    oblique wall the far end of the image is much less certain than the part near the aim point.
+    oblique wall the far end of the image is much less certain than the part near the aim point. lever_m (n,):
+    each point's distance from the pattern's centre when that lies off this wall (another wall of a corner).
     """
     pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
     rays = np.column_stack([pts, np.zeros(len(pts))]) - T_wall_from_projector[:3, 3]
     cos_i = np.abs(rays[:, 2]) / np.linalg.norm(rays, axis=1)
     tan_i = np.tan(np.minimum(np.arccos(np.clip(cos_i, 0.0, 1.0)), np.radians(80.0)))
-    lever = np.linalg.norm(pts - np.asarray(centre_xy, dtype=np.float64)[:2], axis=1)
+    lever = np.linalg.norm(pts - np.asarray(centre_xy, dtype=np.float64)[:2], axis=1) if lever_m is None \
+        else np.asarray(lever_m, dtype=np.float64)
     s_offset = centre_distance_95_m / tol.Z95 * tan_i
     s_normal = lever * np.radians(normal_95_deg) / np.sqrt(5.991) * tan_i
     s_calib = calibration_px * footprint_m

@@ -67,6 +67,9 @@ class Registration:
     loop: registration.ClosedLoopResult | None = None
     correction_xy: NDArray[np.float64] = field(default_factory=lambda: np.zeros(2))
     estimated_at: float = field(default_factory=time.monotonic)
+    in_plane_sigma_m: float = 0.0   # the wall pose's in-plane 1σ and roll 1σ: another wall's σ is drawn from them
+    roll_sigma_rad: float = 0.0
+    calibration_px: float = 0.0
 
 
 def _quality(rig: Rig, section: str, key: str) -> float:
@@ -279,7 +282,9 @@ class ProjectionSession:
         sigma = trusted.sigma_m if trusted.usable else (float(local.max()) if len(local) else float("inf"))
         laser_offset = None if scan is None else registration.laser_plane_offset_m(T_wall_from_robot, scan, aim[0])
         self.registration = Registration(head, T_wall_from_robot, T_wall_from_projector, plane, sigma, source,
-                                         distance, inc, footprint, scan, laser_offset, trusted)
+                                         distance, inc, footprint, scan, laser_offset, trusted,
+                                         in_plane_sigma_m=in_plane_sigma, roll_sigma_rad=roll_sigma_rad,
+                                         calibration_px=calib_px)
         self.log.append(f"wall pose: {plane.corners} corners, σ {sigma * 1000:.2f} mm on the wall, "
                         f"{distance:.2f} m at {inc:.0f}°, in-plane from {source}")
         return self.registration
@@ -375,6 +380,9 @@ class ProjectionSession:
         lines = [f"registered: ±{decision.bound_m * 1000:.1f} mm (95 %)"]
         if clip is not None:
             lines.append(f"map limited to the well-registered {100 * trusted.share:.0f} % (outlined)")
+        raster = self.map_projector.raster
+        if raster is not None and raster.zone_texels:
+            lines.append(f"hatched: {tol.DIN_ZONE_WORDS} (not scanned)")
         if self.drill_xy is not None:
             lines.append(f"drill: {self.drill_check(self.drill_xy).message}")
         self.last_words = slipped + lines  # the slip first: it is what the craftsman must act on

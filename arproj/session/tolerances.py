@@ -25,6 +25,8 @@ DIN_HORIZONTAL_BOTTOM_FROM_FLOOR_M = (0.15, 0.45)
 DIN_HORIZONTAL_MIDDLE_FROM_FLOOR_M = (0.90, 1.30)  # only on walls with work surfaces (kitchens)
 DIN_VERTICAL_FROM_EDGE_M = (0.10, 0.30)  # beside wall corners, doors and windows
 DIN_ZONE_OPACITY = 0.18
+DIN_SOCKET_HALF_WIDTH_M = 0.10  # a known socket's lines run vertically to it: a strip this far either side
+DIN_ZONE_WORDS = "zone: expect lines here"  # what a zone says where the wall was not scanned (never "safe")
 
 # Closed loop
 CLOSED_LOOP_MAX_CORRECTION_M = 0.006  # larger offsets are not "small": re-estimate instead of correcting

@@ -24,17 +24,69 @@ from numpy.typing import NDArray
 from arproj.session import tolerances as tol
 from geometry.errors import InputError
 from geometry.inputs import check_file
+from geometry.poses import invert
 from mapping.evidence import FILE_NAME as COVERAGE_FILE
 from mapping.evidence import Coverage
 from mapping.grid import GridInfo
 from mapping.mapfile import FILE_NAME as OBJECTS_FILE
 from mapping.mapfile import MAP_CLASSES, OUTLINE_CLASSES, MappedObject, check_objects_within, read_objects
+from scanner.priors import room_heights
 
 MAX_GLB_BYTES = 1 << 30  # a wall's textured mesh is tens of MB
 MAX_WALL_M = 100.0       # a wall map's vertices, metres from the wall frame's origin
 
-__all__ = ["MAP_CLASSES", "OUTLINE_CLASSES", "MappedObject", "WallMap", "load_wall_map", "wall_map_from_wall",
-           "wall_map_from_wall_file"]
+__all__ = [
+    "MAP_CLASSES",
+    "OUTLINE_CLASSES",
+    "MappedObject",
+    "WallMap",
+    "WallRoom",
+    "load_wall_map",
+    "wall_map_from_wall",
+    "wall_map_from_wall_file",
+    "wall_room_in_room",
+]
+
+
+@dataclass
+class WallRoom:
+    """What is known of the map's wall in its room, in the map's wall frame (metres): the floor's and the
+    ceiling's height (y), the room corners at the wall's two ends (x), doors and windows as (kind, x0, y0, x1,
+    y1) boxes, the centres (n, 2) of known sockets and switches; source: where it came from. The DIN 18015-3
+    zones are drawn from it (overlays.room_zones) where the wall was not scanned."""
+
+    floor_y_m: float
+    ceiling_y_m: float
+    corner_x_m: tuple[float, float]
+    openings: list[tuple[str, float, float, float, float]] = field(default_factory=list)
+    sockets: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2)))
+    source: str = ""
+
+
+def opening_boxes(openings: list) -> list[tuple[str, float, float, float, float]]:
+    """(kind, x0, y0, x1, y1) of scanner.wall.Opening outlines."""
+    out = []
+    for o in openings:
+        p = np.asarray(o.outline_m, dtype=np.float64)
+        out.append((str(o.kind), float(p[:, 0].min()), float(p[:, 1].min()), float(p[:, 0].max()),
+                    float(p[:, 1].max())))
+    return out
+
+
+def wall_room_in_room(T_room_from_wall: NDArray[np.float64], corners_m: NDArray[np.float64], height_m: float,
+                      wall_index: int, openings: list | None = None, sockets: NDArray[np.float64] | None = None,
+                      source: str = "") -> WallRoom:
+    """The WallRoom of a map whose wall frame sits at T_room_from_wall on room wall wall_index of the floor
+    polygon corners_m (room frame: z up, floor z = 0; wall i from corner i to i + 1), height_m high. openings:
+    scanner.wall.Opening items in the map's wall frame; sockets (n, 2) there."""
+    c = np.asarray(corners_m, dtype=np.float64).reshape(-1, 2)
+    a, b = c[wall_index], c[(wall_index + 1) % len(c)]
+    ends = np.array([[a[0], a[1], 0.0], [b[0], b[1], 0.0], [a[0], a[1], float(height_m)]])
+    local = ends @ invert(T_room_from_wall)[:3, :3].T + invert(T_room_from_wall)[:3, 3]
+    xs = sorted((float(local[0, 0]), float(local[1, 0])))
+    return WallRoom(float(local[0, 1]), float(local[2, 1]), (xs[0], xs[1]), opening_boxes(openings or []),
+                    np.zeros((0, 2)) if sockets is None else np.asarray(sockets, dtype=np.float64).reshape(-1, 2),
+                    source)
 
 
 @dataclass
@@ -48,6 +100,7 @@ class WallMap:
     uv_from_xy: NDArray[np.float64] | None = None
     coverage: Coverage | None = None
     source: str = ""
+    room: WallRoom | None = None  # the wall in its room (floor, ceiling, corners, openings): None, not known
 
     @property
     def extent(self) -> tuple[float, float, float, float]:
@@ -167,4 +220,8 @@ def wall_map_from_wall(wall: object, source: str = "wall truth") -> WallMap:
     w, h = wall.width_m, wall.height_m  # type: ignore[attr-defined]
     # The truth is known everywhere: what a complete, perfect scan would have covered.
     coverage = Coverage.complete(GridInfo.covering(0.0, 0.0, w, h, tol.TRUTH_COVERAGE_CELL_M), bounds=(0.0, 0.0, w, h))
-    return WallMap(plane_mesh(0.0, 0.0, w, h), objects, coverage=coverage, source=source)
+    # its room as the scan's priors take it: floor and ceiling from the wall file or the survey, its ends the corners
+    floor, ceiling, origin = room_heights(wall)  # type: ignore[arg-type]
+    room = WallRoom(floor, ceiling, (0.0, float(w)), opening_boxes(wall.openings),  # type: ignore[attr-defined]
+                    np.asarray(wall.sockets, dtype=np.float64).reshape(-1, 2), f"{origin}")  # type: ignore[attr-defined]
+    return WallMap(plane_mesh(0.0, 0.0, w, h), objects, coverage=coverage, source=source, room=room)

@@ -287,3 +287,30 @@ def test_project_on_a_head_served_by_devices_serve(tmp_path: Path) -> None:
         assert truth["aim_error_mm"] < 4.0 * result["registration"]["sigma_mm"], truth
     finally:
         _stop(serve)
+
+
+def test_site_file_keeps_openings_and_sockets_and_the_map_gets_its_room(scanned: tuple[Path, object],
+                                                                        tmp_path: Path) -> None:
+    """The DIN zones' inputs: doors, windows and sockets read back from the site file, the floor, ceiling and
+    corners from its room in the map's wall frame (the simulated scanning site's truth)."""
+    from arproj.session.wallmap import wall_room_in_room
+    from geometry.errors import InputError
+
+    site_path, _ = scanned
+    doc = yaml.safe_load(site_path.read_text())
+    door = {"kind": "door", "outline_m": [[0.1, 0.0], [0.3, 0.0], [0.3, 0.25], [0.1, 0.25]]}
+    path = tmp_path / "site.yaml"
+    path.write_text(yaml.safe_dump(_edit(_edit(doc, "openings", [door]), "sockets", [[0.05, 0.1]])))
+    wall = read_site(path)[KEY]
+    assert [o.kind for o in wall.openings] == ["door"] and wall.sockets.tolist() == [[0.05, 0.1]]
+    assert read_site(site_path)[KEY].openings == [] and read_site(site_path)[KEY].sockets.shape == (0, 2)
+    room = wall_room_in_room(wall.T_room_from_wall, wall.corners_m, wall.room_height_m, wall.wall_index,
+                             wall.openings, wall.sockets)
+    assert room.floor_y_m == pytest.approx(-wall.floor_margin_m, abs=1e-9)
+    assert room.ceiling_y_m == pytest.approx(wall.room_height_m - wall.floor_margin_m, abs=1e-9)
+    assert room.corner_x_m == (pytest.approx(-wall.side_margin_m, abs=1e-9),
+                               pytest.approx(wall.room_width_m - wall.side_margin_m, abs=1e-9))
+    assert room.openings == [("door", 0.1, 0.0, 0.3, 0.25)]
+    path.write_text(yaml.safe_dump(_edit(doc, "sockets", [[9.0, 0.1]])))
+    with pytest.raises(InputError, match=r"walls.plate: sockets\[0\]"):
+        read_site(path)

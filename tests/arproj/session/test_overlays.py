@@ -153,3 +153,37 @@ def test_an_object_with_a_depth_gets_a_label_beside_its_band():
     assert changed.any()
     assert ys.min() > 1.2 + band and ys.max() < 1.2 + band + 2.2 * overlays.DEPTH_LABEL_HEIGHT_M
     assert abs(0.5 * (xs.min() + xs.max()) - 1.5) < 0.02
+
+
+def test_din_zones_come_from_the_room_floor_ceiling_corners_openings_and_sockets():
+    # The map's frame lies 0.5 m right of the room's corner and 0.3 m above the floor, the room 2.7 m high: the
+    # zones lie where the room puts them, not at the map's edges.
+    from types import SimpleNamespace
+
+    from arproj.session.wallmap import wall_room_in_room
+    from geometry.poses import make_pose
+    from wallpose.pose import wall_frames
+
+    wall = _wall([], covered_x_from=2.6)  # scanned only at the right end
+    corners = np.array([[4.0, 0.0], [0.0, 0.0], [0.0, 3.0], [4.0, 3.0]])
+    T_room_from_wall = wall_frames(corners)[0][0] @ make_pose(None, [0.5, 0.3, 0.0])
+    door = SimpleNamespace(kind="door", outline_m=np.array([[1.2, -0.3], [2.0, -0.3], [2.0, 1.8], [1.2, 1.8]]))
+    wall.room = wall_room_in_room(T_room_from_wall, corners, 2.7, 0, [door], np.array([[0.8, 0.0]]))
+    assert wall.room.floor_y_m == pytest.approx(-0.3) and wall.room.ceiling_y_m == pytest.approx(2.4)
+    assert wall.room.corner_x_m == (pytest.approx(-0.5), pytest.approx(3.5))
+    raster = overlays.draw_map(wall, 0.002)
+    zone = overlays.zone_mask(wall, raster)
+
+    def at(x, y):
+        c, r = np.round(raster.to_px(np.array([[x, y]]))[0]).astype(int)
+        return bool(zone[r, c])
+
+    assert at(0.1, 2.0) and not at(0.1, 2.3)   # the top zone 0.15–0.45 m below the ceiling (2.4), not the map's top
+    assert at(0.1, 0.05) and not at(0.1, 0.3)  # the bottom zone 0.15–0.45 m above the floor (-0.3), not the map's foot
+    assert not at(0.2, 1.2)                 # no corner zone at the map's left edge: the room's corner is at -0.5
+    assert at(1.0, 1.2) and at(2.2, 1.2) and at(1.6, 1.8 + 0.2)    # beside and above the door
+    assert at(0.8, 1.2) and at(0.72, 1.2) and not at(0.5, 1.2)     # the socket's vertical strip (±0.10 m)
+    assert not at(2.7, 1.2) and not at(2.95, 2.4 - 0.3)            # scanned: the scan tells, not the zone
+    assert raster.zone_texels == int(zone.sum()) > 0 and raster.zone_labels >= 1
+    # never drawn as safe: a zone's texels are the white hatch or its words, not the safe verdict's green
+    assert not np.all(raster.image[zone][:, :3] == overlays.VERDICT_COLOR[overlays.VERDICT_SAFE], axis=1).any()

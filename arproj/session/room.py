@@ -1,0 +1,327 @@
+"""Several walls in one site frame: one beamer frame over an inside corner, each wall drawn with its own map.
+
+The session registers on the first wall as ever (pattern, wall pose, closed loop, gate): the wall pose puts the
+robot in the room, so the projector's pose is known against every wall of the site's room. Each other wall in
+the beam gets its own closed loop (check marks on it, photographed, each camera's ray met with that wall's
+plane), its own small in-plane correction and its own gate. The frame is the walls' map meshes drawn in the
+room frame, each textured by its own wall's raster: a ray from the projector meets the nearest mesh (the
+depth test splits the image by wall), and where no wall's map is — or a wall's gate is closed — nothing is
+drawn: dark, unknown, never another wall's colours.
+
+    walls = [RoomWall.of(0, map0, T_room_from_wall0, (w0, h0)), RoomWall.of(1, map1, T_room_from_wall1, (w1, h1))]
+    with RoomSession(rig, walls, robot) as s:
+        verdicts = s.update()          # {wall index: WallVerdict}
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from arproj.session import gate, overlays, registration
+from arproj.session import tolerances as tol
+from arproj.session.projection import check_mark_raster, textured_mesh
+from arproj.session.robot_io import RobotIO
+from arproj.session.session import CLOSED_LOOP_MARKS, ProjectionSession
+from arproj.session.wallmap import WallMap
+from geometry.intrinsics import Intrinsics
+from geometry.poses import invert, make_pose, transform_points
+from geometry.rig import Rig
+from render import MeshRenderer
+from render.simplify import PROJECTED_ERROR_PX
+
+MARK_GRID = (16, 10)     # projector-image grid the marks and the drawn area of each wall are taken from
+DRAWN_BORDER = 0.02
+
+
+@dataclass
+class RoomWall:
+    """A wall of the site's room with its map: index in the room, the map (in its wall frame), the map's wall
+    frame in the room (T_room_from_wall) and the wall's size (width, height) metres."""
+
+    index: int
+    wall_map: WallMap
+    T_room_from_wall: NDArray[np.float64]
+    size_m: tuple[float, float]
+
+    def from_room(self, T_room_from_x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return invert(self.T_room_from_wall) @ T_room_from_x
+
+
+def first_wall_hits(walls: list[RoomWall], T_room_from_projector: NDArray[np.float64], intr: Intrinsics,
+                    pixels: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Which wall (position in walls, -1: none) each projector pixel's ray (n, 2) meets first within the wall's
+    size, and where on it (n, 2) wall metres (NaN: none): the beamer's image split by wall."""
+    px = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    n = len(px)
+    best_t, which, where = np.full(n, np.inf), np.full(n, -1, dtype=np.int64), np.full((n, 2), np.nan)
+    if n == 0:
+        return which, where
+    rays_p = intr.rays(px)
+    for k, w in enumerate(walls):
+        T = w.from_room(T_room_from_projector)
+        rays, origin = rays_p @ T[:3, :3].T, T[:3, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -origin[2] / rays[:, 2]
+        xy = origin[:2] + t[:, None] * rays[:, :2]
+        width, height = w.size_m
+        ok = (t > 0) & (t < best_t) & (xy[:, 0] >= 0) & (xy[:, 0] <= width) & (xy[:, 1] >= 0) & (xy[:, 1] <= height)
+        best_t[ok], which[ok], where[ok] = t[ok], k, xy[ok]
+    return which, where
+
+
+def wall_points_in_view(walls: list[RoomWall], k: int, T_room_from_projector: NDArray[np.float64],
+                        intr: Intrinsics, grid: tuple[int, int] = MARK_GRID, border: float = DRAWN_BORDER
+                        ) -> NDArray[np.float64]:
+    """Wall points (n, 2) of walls[k] where a grid over the beamer's image meets that wall first, on its map."""
+    gx = np.linspace(border, 1 - border, grid[0]) * (intr.width - 1)
+    gy = np.linspace(border, 1 - border, grid[1]) * (intr.height - 1)
+    px = np.array([[x, y] for y in gy for x in gx])
+    which, xy = first_wall_hits(walls, T_room_from_projector, intr, px)
+    x0, y0, x1, y1 = walls[k].wall_map.extent
+    ok = (which == k) & (xy[:, 0] > x0) & (xy[:, 0] < x1) & (xy[:, 1] > y0) & (xy[:, 1] < y1)
+    return xy[ok]
+
+
+def _shift(xy: NDArray[np.float64]) -> NDArray[np.float64]:
+    return make_pose(None, [float(xy[0]), float(xy[1]), 0.0])
+
+
+class RoomProjector:
+    """Renders one beamer frame of several walls' rasters in the room frame. Owns its renderers; use `with`."""
+
+    def __init__(self, walls: list[RoomWall], projector: Intrinsics, ctx: object | None = None) -> None:
+        self.walls = walls
+        self.projector = projector
+        self._renderer = MeshRenderer(ctx=ctx, max_error_px=PROJECTED_ERROR_PX)  # type: ignore[arg-type]
+        self._key: tuple | None = None
+        self._empty = True
+
+    def __enter__(self) -> RoomProjector:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    def release(self) -> None:
+        self._renderer.release()
+
+    def show(self, key: tuple, rasters: dict[int, overlays.WallRaster],
+             corrections: dict[int, NDArray[np.float64]]) -> None:
+        """Upload the rasters (position in walls → raster; walls without one are not drawn at all) with each
+        wall's in-plane correction (content meant for c is drawn at c - correction, where it lands right)."""
+        if key == self._key:
+            return
+        scene = trimesh.Scene()
+        for k, raster in rasters.items():
+            w = self.walls[k]
+            mesh = textured_mesh(w.wall_map, raster)
+            T = w.T_room_from_wall @ _shift(-corrections.get(k, np.zeros(2)))
+            mesh.vertices = transform_points(T, np.asarray(mesh.vertices))
+            scene.add_geometry(mesh, node_name=f"wall{w.index}")
+        self._empty = not rasters
+        if rasters:
+            self._renderer.set_mesh(scene)
+        self._key = key
+
+    def render(self, T_room_from_projector: NDArray[np.float64]) -> NDArray[np.uint8]:
+        """The pre-warped frame (h, w, 3) uint8; black where no wall is drawn."""
+        if self._empty:
+            return np.zeros((self.projector.height, self.projector.width, 3), dtype=np.uint8)
+        return self._renderer.render(self.projector, T_room_from_projector).color
+
+
+@dataclass
+class WallVerdict:
+    """One wall in the beam: the gate's decision on it, its closed loop, its correction, the pose of the
+    projector in its frame (correction applied) and where on it the map may be drawn."""
+
+    wall: int
+    decision: gate.GateDecision
+    T_wall_from_projector: NDArray[np.float64]
+    loop: registration.ClosedLoopResult | None = None
+    correction_xy: NDArray[np.float64] = field(default_factory=lambda: np.zeros(2))
+    trusted: registration.TrustedRegion | None = None
+
+    @property
+    def shown(self) -> bool:
+        return self.decision.show_map
+
+
+class RoomSession:
+    """A projection session over several walls of one room: registers on walls[0], checks and gates each."""
+
+    def __init__(self, rig: Rig, walls: list[RoomWall], robot: RobotIO, ctx: object | None = None,
+                 tolerance_m: float = tol.REGISTRATION_TOLERANCE_M) -> None:
+        if not walls:
+            raise ValueError("RoomSession needs at least one wall")
+        self.walls = walls
+        self.robot = robot
+        self.tolerance_m = tolerance_m
+        self.session = ProjectionSession(rig, walls[0].wall_map, robot, ctx=ctx, tolerance_m=tolerance_m)
+        self.projector_intr = self.session.projector_intr
+        self.room_projector = RoomProjector(walls, self.projector_intr, ctx)
+        self.verdicts: dict[int, WallVerdict] = {}
+        self.last_frame: NDArray[np.uint8] | None = None
+        self.last_words: list[str] = []
+
+    def __enter__(self) -> RoomSession:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self.session.close()
+        self.room_projector.release()
+
+    @property
+    def T_room_from_projector(self) -> NDArray[np.float64] | None:
+        """The registered projector in the room, without any wall's closed-loop correction."""
+        reg = self.session.registration
+        if reg is None:
+            return None
+        return self.walls[0].T_room_from_wall @ _shift(-reg.correction_xy) @ reg.T_wall_from_projector
+
+    @property
+    def T_room_from_robot(self) -> NDArray[np.float64] | None:
+        reg = self.session.registration
+        return None if reg is None else self.walls[0].T_room_from_wall @ reg.T_wall_from_robot
+
+    def update(self, show: bool = True) -> dict[int, WallVerdict]:
+        """One cycle: the first wall's session update, then each other wall's closed loop and gate; the frame
+        draws each wall whose gate is open, on its own map; a warning when none is."""
+        first = self.session.update(show=False)
+        reg = self.session.registration
+        verdicts: dict[int, WallVerdict] = {}
+        if reg is not None:
+            verdicts[0] = WallVerdict(self.walls[0].index, first, reg.T_wall_from_projector.copy(), reg.loop,
+                                      reg.correction_xy.copy(), reg.trusted)
+            for k in range(1, len(self.walls)):
+                verdicts[k] = self._judge(k)
+        self.verdicts = verdicts
+        if show:
+            self.last_frame = self.render_frame(first)
+            self.robot.show(self.last_frame)
+        return verdicts
+
+    # -- another wall ------------------------------------------------------------------------------------
+    def _judge(self, k: int) -> WallVerdict:
+        """Closed loop and gate on walls[k] from the registration made on walls[0]."""
+        s, reg, w = self.session, self.session.registration, self.walls[k]
+        assert reg is not None and s.last_evidence is not None
+        T_room_from_projector, T_room_from_robot = self.T_room_from_projector, self.T_room_from_robot
+        assert T_room_from_projector is not None and T_room_from_robot is not None
+        T_wall_from_projector = w.from_room(T_room_from_projector)
+        T_wall_from_robot = w.from_room(T_room_from_robot)
+        drawn = wall_points_in_view(self.walls, k, T_room_from_projector, self.projector_intr)
+        loop = self._closed_loop(k, drawn, T_wall_from_robot)
+        correction = np.zeros(2)
+        if loop.seen.sum() >= tol.CLOSED_LOOP_MIN_FEATURES and \
+                np.linalg.norm(loop.offset_xy) <= tol.CLOSED_LOOP_MAX_CORRECTION_M:
+            correction = loop.offset_xy
+        trusted = None
+        ev = gate.RegistrationEvidence(pose_failure=None, head_command_error_deg=s.last_evidence.head_command_error_deg,
+                                       robot_motion_m=s.last_evidence.robot_motion_m,
+                                       laser_plane_offset_m=s.last_evidence.laser_plane_offset_m,
+                                       head_failure=s.last_evidence.head_failure)
+        ev.closed_loop_expected = len(loop.seen)
+        ev.closed_loop_errors_m = np.linalg.norm(loop.errors_xy - correction, axis=1)
+        ev.stereo_residual_px = loop.residual_px if loop.seen.any() else None
+        if len(drawn):
+            # the pose's error on this wall, as on the first: its plane's offset and tilt, the in-plane σ, the
+            # roll, the calibration — the lever from the pattern's centre measured in the room
+            aim_room = transform_points(self.walls[0].T_room_from_wall,
+                                        registration.aim_point_on_wall(reg.T_wall_from_projector, self.projector_intr))
+            drawn_room = np.column_stack([drawn, np.zeros(len(drawn))]) @ w.T_room_from_wall[:3, :3].T \
+                + w.T_room_from_wall[:3, 3]
+            lever = np.linalg.norm(drawn_room - aim_room, axis=1)
+            mid = transform_points(invert(T_wall_from_projector), [[*drawn[len(drawn) // 2], 0.0]])
+            footprint = registration.pixel_footprint_m(T_wall_from_projector, self.projector_intr,
+                                                       self.projector_intr.project(mid)[0])
+            local = registration.local_registration_sigma_m(
+                reg.plane.centre_distance_95_m, reg.plane.normal_95_deg, T_wall_from_projector, drawn,
+                drawn[0], reg.in_plane_sigma_m, footprint, reg.calibration_px, reg.roll_sigma_rad, lever_m=lever)
+            trusted = registration.trusted_region(drawn, local, self.tolerance_m)
+            if len(ev.closed_loop_errors_m):
+                trusted, sigma = registration.checked_region(
+                    trusted, float(np.max(ev.closed_loop_errors_m)) + ev.robot_motion_m, self.tolerance_m)
+            else:
+                sigma = trusted.sigma_m if trusted.usable else float(local.max())
+            ev.pose_sigma_m = max(sigma, reg.sigma_m)
+        else:
+            ev.pose_failure = f"wall {w.index}: none of its map is in the beam"
+        decision = gate.decide(ev, self.tolerance_m)
+        return WallVerdict(w.index, decision, _shift(correction) @ T_wall_from_projector, loop, correction, trusted)
+
+    def _closed_loop(self, k: int, drawn: NDArray[np.float64], T_wall_from_robot: NDArray[np.float64]
+                     ) -> registration.ClosedLoopResult:
+        """Check marks on walls[k] only (the other walls dark), photographed; each camera's ray met with that
+        wall's plane."""
+        s = self.session
+        rig = s.rig
+        step = max(1, int(np.ceil(len(drawn) / CLOSED_LOOP_MARKS)))
+        marks = drawn[::step]
+        if len(marks) < tol.CLOSED_LOOP_MIN_FEATURES:
+            return registration.ClosedLoopResult(marks, np.zeros((0, 2)), np.zeros(len(marks), bool),
+                                                 float("nan"), float("nan"))
+        cam_l, cam_r = rig.intrinsics["camera_left"], rig.intrinsics["camera_right"]
+        T_robot_from_left = rig.pose("T_robot_from_camera_left")
+        T_right_from_left = rig.pose("T_camera_right_from_camera_left")
+        T_room_from_projector = self.T_room_from_projector
+        assert T_room_from_projector is not None
+        aim = self.walls[k].from_room(T_room_from_projector)[:3, 3]
+        distance = float(abs(aim[2]))
+        radius_m = registration.mark_radius_m(max(distance, 0.3), cam_l)
+        raster = check_mark_raster(self.walls[k].wall_map, marks, radius_m)
+        self.room_projector.show(("marks", k, marks.round(5).tobytes()), {k: raster}, {})
+        frame = self.room_projector.render(T_room_from_projector)
+        left, right = self.robot.capture(frame)
+        T_robot_from_right = T_robot_from_left @ invert(T_right_from_left)
+        uv_l = registration.predict_camera_pixels(marks, T_wall_from_robot, T_robot_from_left, cam_l)
+        uv_r = registration.predict_camera_pixels(marks, T_wall_from_robot, T_robot_from_right, cam_r)
+        # each mark's radius in the camera from its own distance (the wall may run away obliquely)
+        marks_robot = transform_points(invert(T_wall_from_robot), np.column_stack([marks, np.zeros(len(marks))]))
+        dist = np.linalg.norm(marks_robot - T_robot_from_left[:3, 3], axis=1)
+        r_px = radius_m * cam_l.fx / dist
+        found_l = registration.find_marks(left, uv_l, r_px)
+        found_r = registration.find_marks(right, uv_r, r_px)
+        loop = registration.measure_marks(marks, found_l, found_r, cam_l, cam_r, T_right_from_left,
+                                          T_wall_from_robot @ T_robot_from_left)
+        s.log.append(f"wall {self.walls[k].index}: " + loop.summary())
+        return loop
+
+    # -- frame -------------------------------------------------------------------------------------------
+    def render_frame(self, first: gate.GateDecision) -> NDArray[np.uint8]:
+        """Each wall whose gate is open drawn with its own map (clipped to its trusted region); the others left
+        dark and named; the warning frame when no wall may be shown."""
+        intr = self.projector_intr
+        shown = {k: v for k, v in self.verdicts.items() if v.shown}
+        if not shown:
+            self.last_words = list(first.craftsman) or [gate.SAY_NO_WALL_POSE]
+            return overlays.warning_frame(intr.width, intr.height, self.last_words)
+        rasters, corrections, key = {}, {}, []
+        for k, v in shown.items():
+            clip = None if v.trusted is None else v.trusted.polygon
+            sigma = round(v.decision.registration_sigma_m / 0.0005) * 0.0005
+            rasters[k] = overlays.draw_map(self.walls[k].wall_map, sigma, None, True, clip=clip)
+            corrections[k] = v.correction_xy
+            clip_key = None if clip is None else clip.round(3).tobytes()
+            key.append((k, sigma, clip_key, v.correction_xy.round(5).tobytes()))
+        self.room_projector.show(("map", *key), rasters, corrections)
+        T = self.T_room_from_projector
+        assert T is not None
+        frame = self.room_projector.render(T).copy()
+        bound = max(v.decision.bound_m for v in shown.values())
+        lines = [f"registered: ±{bound * 1000:.1f} mm (95 %) on wall " + ", ".join(
+            str(self.walls[k].index) for k in shown)]
+        if any(r.zone_texels for r in rasters.values()):
+            lines.append(f"hatched: {tol.DIN_ZONE_WORDS} (not scanned)")
+        hidden = [self.walls[k].index for k in self.verdicts if k not in shown]
+        if hidden:
+            lines.append("not checked, left dark: wall " + ", ".join(str(i) for i in hidden))
+        self.last_words = lines
+        return overlays.draw_legend(frame, lines)
