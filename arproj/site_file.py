@@ -47,7 +47,7 @@ from geometry.errors import InputError
 from geometry.inputs import fail, float_array, load_document, number, text
 from geometry.poses import invert, make_pose
 from scanner.laser import ROOM_KEYS, LaserConfig
-from scanner.wall import Opening, Wall, _parse_openings, _parse_sockets
+from scanner.wall import Opening, Wall, parse_openings, parse_sockets
 from wallpose.pose import RoomMap, wall_frames
 
 FORMAT = "arproj-site/1"
@@ -283,8 +283,8 @@ def _read_wall(path: Path, key: str, entry: Any) -> SiteWall:
     folder = path.parent
     # doors, windows and sockets (optional; the DIN zones are drawn beside them), read as the wall file reads them
     where = f"{path}: walls.{key}"
-    openings = _parse_openings(where, entry.get("openings"), width, height)
-    sockets = _parse_sockets(where, entry.get("sockets"), width, height)
+    openings = parse_openings(where, entry.get("openings"), width, height)
+    sockets = parse_sockets(where, entry.get("sockets"), width, height)
     return SiteWall(key, f.text("wall.name"), width, height, f.text("wall.fingerprint"), T,
                     f.number("wall_in_room_sigma_m.along", non_negative=True),
                     f.number("wall_in_room_sigma_m.height", non_negative=True), corners, room_height, index,

@@ -388,8 +388,8 @@ def wall_from_dict(raw: Any, source: str = "<wall>") -> Wall:
             raise fail(source, f"objects[{i}].id", obj.id, "is used twice; ids must be unique")
         seen.add(obj.id)
     return Wall(width_m=width, height_m=height, material=material, name=name, objects=objects, source=source,
-                room=_parse_room(source, raw.get("room"), height), openings=_parse_openings(
-                    source, raw.get("openings"), width, height), sockets=_parse_sockets(
+                room=_parse_room(source, raw.get("room"), height), openings=parse_openings(
+                    source, raw.get("openings"), width, height), sockets=parse_sockets(
                     source, raw.get("sockets"), width, height))
 
 
@@ -404,7 +404,7 @@ def _parse_room(source: str, raw: Any, wall_h: float) -> Room | None:
     return Room(floor, ceiling)
 
 
-def _parse_openings(source: str, raw: Any, wall_w: float, wall_h: float) -> list[Opening]:
+def parse_openings(source: str, raw: Any, wall_w: float, wall_h: float) -> list[Opening]:
     if raw is None:
         return []
     if not isinstance(raw, list):
@@ -430,7 +430,7 @@ def _parse_openings(source: str, raw: Any, wall_w: float, wall_h: float) -> list
     return openings
 
 
-def _parse_sockets(source: str, raw: Any, wall_w: float, wall_h: float) -> np.ndarray:
+def parse_sockets(source: str, raw: Any, wall_w: float, wall_h: float) -> np.ndarray:
     if raw is None or raw == []:
         return np.zeros((0, 2))
     if not isinstance(raw, list):

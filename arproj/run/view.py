@@ -30,6 +30,7 @@ from scipy import ndimage
 from geometry.errors import InputError
 from mapping.evidence import DEFAULT_COVERAGE_RADIUS_M, SAFETY_CHANNELS
 from mapping.grid import GridInfo
+from scanner.channels import AC, CAPACITIVE, INDUCTIVE
 from scanner.channels import NAMES as CHANNEL_NAMES
 from scanner.peaks import detect_peaks
 from scanner.sim.world import FrameReport
@@ -39,7 +40,7 @@ DETECTION_STEP_M = 0.004  # the view's peak search resamples a pass this finely 
 LIVE = "live"
 ENTITIES = ("wall/outline", "wall/samples", "wall/coverage", *(f"wall/map/{c}" for c in CHANNEL_NAMES),
             *(f"wall/detections/{c}" for c in CHANNEL_NAMES), "wall/robot", "wall/scanner")
-_DETECTION_COLOUR = {"inductive": (230, 60, 40), "capacitive": (60, 120, 230), "ac": (240, 200, 0)}
+_DETECTION_COLOUR = {INDUCTIVE.name: (230, 60, 40), CAPACITIVE.name: (60, 120, 230), AC.name: (240, 200, 0)}
 
 
 def check_target(view: str) -> None:
@@ -104,7 +105,7 @@ class ScanView:
             return
         self._at(times[0])
         xy = np.column_stack([samples["x_m"], samples["y_m"]])
-        ind = np.nan_to_num(np.asarray(samples.get("inductive", np.zeros(len(xy))), dtype=np.float64))
+        ind = np.nan_to_num(np.asarray(samples.get(INDUCTIVE.name, np.zeros(len(xy))), dtype=np.float64))
         level = np.clip(ind, 0.0, 1.0)
         colours = np.column_stack([255 * level, 80 + 100 * (1 - level), 255 * (1 - level)]).astype(np.uint8)
         self._pending.append((self._screen(xy), colours))

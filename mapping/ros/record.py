@@ -33,6 +33,7 @@ from mapping.mapfile import MappedObject
 from mapping.ros.bag import CdrBuffer, RosBag, header, tf_message
 from mapping.scandata import ScanData
 from mapping.texture import CLASS_COLOURS
+from scanner.channels import NAMES as CHANNEL_NAMES
 from scanner.laser import LaserConfig, Scan
 from scanner.sim.world import FrameReport
 
@@ -47,7 +48,7 @@ _GRID_VALUE = {drill.VERDICT_CODES[drill.SAFE]: FREE, drill.VERDICT_CODES[drill.
                drill.VERDICT_CODES[drill.UNKNOWN]: UNKNOWN}
 TF_PERIOD_S = 0.5  # the scanner's pose along a pass, this often in scan time (RViz draws it moving)
 NS = 1_000_000_000
-PASS_ARRAYS = ("time_s", "drive_u_m", "drive_v_m", "x_m", "y_m", "inductive", "capacitive", "ac")
+PASS_ARRAYS = ("time_s", "drive_u_m", "drive_v_m", "x_m", "y_m", *CHANNEL_NAMES)
 AXIS_CODES = {"x": 0, "y": 1}  # as the log codes a pass's axis; 2: a following pass along both drives
 # marker types (visualization_msgs/msg/Marker)
 LINE_STRIP, CYLINDER, TEXT_VIEW_FACING = 4, 3, 9
