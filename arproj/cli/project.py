@@ -82,10 +82,18 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         interactive: bool = typer.Option(False, "--interactive", help="After the first cycle, read commands "
                                          "from the terminal: aim X,Y | drill X,Y | check X,Y | update | "
                                          "estimate | status | quit."),
+        record: Path = typer.Option(None, "--record", help="Also write every cycle as ROS 2 messages into this "
+                                    ".mcap (tf, CameraInfo, the frame and the captures as PNG, the gate state); "
+                                    "metadata.yaml beside it."),
         as_json: bool = typer.Option(False, "--json", help="Print the session's results as JSON."),
     ) -> None:
         """Project the in-wall map onto the wall, pre-warped for the beamer, with a safety gate."""
         from arproj.run.project import SessionOptions, run_session
+
+        if record is not None:  # refused before any work
+            from mapping.ros.bag import check_path
+
+            check_path(record)
 
         if truth is not None:  # a shipped name or a file, checked before the session starts
             from scanner.wall import load_wall, wall_file
@@ -106,7 +114,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             follow=_points(follow, "--follow") if follow else [], cycles=cycles, output=output, window=window,
             screen=screen, head_url=head_url, laser_url=laser_url, left=left, right=right, wall_prior=wall_prior,
             head_fault=head_fault, commands=_stdin_lines() if interactive else None, site=site,
-            site_key=wall_key if site is not None else None)
+            site_key=wall_key if site is not None else None, record=record)
         result = run_session(options, say=lambda text: err_console.print(text, highlight=False))
         if as_json:
             print(json.dumps(result, indent=2))

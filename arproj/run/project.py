@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -49,6 +50,7 @@ class SessionOptions:
     site: Path | None = None          # a site file (arproj-site/1): find wall `site_key` again by the laser
     site_key: str | None = None
     head_fault: str | None = None
+    record: Path | None = None  # --record FILE.mcap: every cycle as ROS 2 messages (arproj.session.record)
     commands: Iterable[str] | None = None  # interactive: lines such as "aim 1.2,1.1", "drill 1.3,1.0", "update"
 
 
@@ -255,7 +257,17 @@ def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options:
     result: dict = {"cycles": [], "map": wall_map.source, "rig": rig.quality.get("source", "rig file")
                     if isinstance(rig.quality, dict) else "rig file",
                     "frames": str(options.output) if options.output else None}
-    with session_cls(rig, wall_map, robot, ctx=ctx) as session:
+    from mapping.ros.bag import RosBag
+
+    recorder = None
+    bag = RosBag(options.record) if options.record is not None else contextlib.nullcontext()
+    with bag, session_cls(rig, wall_map, robot, ctx=ctx) as session:  # the bag closed also on an error
+        if isinstance(bag, RosBag):
+            from arproj.session.record import SessionRecorder
+
+            recorder = SessionRecorder(bag, rig)
+            recorder.watch(robot)
+            result["record"] = str(bag.path)
         x0, y0, x1, y1 = wall_map.extent
         # --cycles 0: keep updating (re-estimate on motion, verify, show) until interrupted (Ctrl-C)
         targets = options.follow or ([None] * options.cycles if options.cycles > 0 else itertools.repeat(None))
@@ -275,6 +287,8 @@ def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options:
                     except (DeviceError, InputError) as err:
                         say(f"[yellow]warning:[/] {err}")
             decision = session.update()
+            if recorder is not None:
+                recorder.cycle(session, decision)
             cycle = {"cycle": k, "show_map": decision.show_map, "reasons": decision.reasons,
                      "bound_mm": None if not np.isfinite(decision.bound_m) else round(decision.bound_m * 1000, 3),
                      "frame_says": list(session.last_words)}
