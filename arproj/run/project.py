@@ -306,7 +306,7 @@ def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options:
             result["cycles"].append(cycle)
             say(f"cycle {k}: " + ("map shown" if decision.show_map else "WARNING: " + "; ".join(decision.reasons)))
         if options.commands is not None:
-            _interactive(session, options.commands, result, say)
+            _interactive(session, options.commands, result, say, recorder)
         reg = session.registration
         if reg is not None:
             result["registration"] = {"T_wall_from_projector": reg.T_wall_from_projector.tolist(),
@@ -322,7 +322,8 @@ COMMAND_HELP = ("commands: aim X,Y | drill X,Y | check X,Y | update | estimate (
                 "status | quit")
 
 
-def _interactive(session: object, commands: Iterable[str], result: dict, say: Callable[[str], None]) -> None:
+def _interactive(session: object, commands: Iterable[str], result: dict, say: Callable[[str], None],
+                 recorder: Any = None) -> None:
     """Run typed commands; a bad command or a failing device is reported and the session goes on."""
     say(COMMAND_HELP)
     for line in commands:
@@ -347,6 +348,8 @@ def _interactive(session: object, commands: Iterable[str], result: dict, say: Ca
                 say(f"({x:.3f}, {y:.3f}) m: {session.drill_check((x, y)).message}")  # type: ignore[attr-defined]
             elif verb in ("update", "estimate"):
                 decision = session.update(force=verb == "estimate")  # type: ignore[attr-defined]
+                if recorder is not None:
+                    recorder.cycle(session, decision)
                 result["cycles"].append({"cycle": len(result["cycles"]), "show_map": decision.show_map,
                                          "reasons": decision.reasons, "command": line.strip()})
                 say("map shown" if decision.show_map else "WARNING: " + "; ".join(decision.reasons))
