@@ -51,30 +51,36 @@ def png_image(image: NDArray[np.uint8], frame_id: str, t_ns: int) -> dict[str, A
     return {"header": header(t_ns, frame_id), "format": "png", "data": data.ravel().tobytes()}
 
 
-class SessionRecorder:
-    """Writes each cycle of a ProjectionSession into a RosBag; `watch(robot)` keeps the cameras' last captures."""
+class Captures:
+    """The robot's cameras' last captures (the pattern and the check marks the session photographs): `watch`
+    wraps the robot's capture."""
 
-    def __init__(self, bag: RosBag, rig: Rig) -> None:
-        self.bag, self.rig = bag, rig
+    def __init__(self) -> None:
+        self.last: tuple[NDArray[np.uint8], NDArray[np.uint8]] | None = None
+
+    def watch(self, robot: Any) -> None:
+        capture = robot.capture
+
+        def recorded(frame: NDArray[np.uint8]) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
+            left, right = capture(frame)
+            self.last = (left, right)
+            return left, right
+
+        robot.capture = recorded
+
+
+class SessionRecorder:
+    """Writes each cycle of a ProjectionSession into a RosBag, with the cameras' last captures (`captures`)."""
+
+    def __init__(self, bag: RosBag, rig: Rig, captures: Captures) -> None:
+        self.bag, self.rig, self.captures = bag, rig, captures
         self.t0_ns = time.time_ns()
         self._t0 = time.monotonic_ns()
-        self.captures: tuple[NDArray[np.uint8], NDArray[np.uint8]] | None = None
         try:
             self.T_robot_from_left: NDArray[np.float64] | None = rig.pose("T_robot_from_camera_left")
             self.T_right_from_left: NDArray[np.float64] | None = rig.pose("T_camera_right_from_camera_left")
         except InputError:
             self.T_robot_from_left = self.T_right_from_left = None
-
-    def watch(self, robot: Any) -> None:
-        """Keep what the robot's cameras capture (the pattern and the check marks the session photographs)."""
-        capture = robot.capture
-
-        def recorded(frame: NDArray[np.uint8]) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
-            left, right = capture(frame)
-            self.captures = (left, right)
-            return left, right
-
-        robot.capture = recorded
 
     def cycle(self, session: Any, decision: Any) -> None:
         t = self.t0_ns + time.monotonic_ns() - self._t0
@@ -93,8 +99,11 @@ class SessionRecorder:
         frame = getattr(session, "last_frame", None)
         if frame is not None:
             self.bag.write("/projector/image/compressed", IMAGE, png_image(frame, "projector", t), t)
-        if self.captures is not None:
-            for name, image in zip(("camera_left", "camera_right"), self.captures, strict=True):
+        if self.captures.last is not None:
+            for name, image in zip(("camera_left", "camera_right"), self.captures.last, strict=True):
                 self.bag.write(f"/{name}/image/compressed", IMAGE, png_image(image, name, t), t)
-        state = "MAP SHOWN" if decision.show_map else "WARNING: " + "; ".join(decision.reasons)
-        self.bag.write("/gate", STRING, {"data": state}, t)
+        self.bag.write("/gate", STRING, {"data": gate_state(decision)}, t)
+
+
+def gate_state(decision: Any) -> str:
+    return "MAP SHOWN" if decision.show_map else "WARNING: " + "; ".join(decision.reasons)

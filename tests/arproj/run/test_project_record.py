@@ -1,5 +1,5 @@
-"""`arproj project --record`: the session's bag read back with rosbags (independent of the writer) against the
-session's own pose, the rig's intrinsics and the frames it showed."""
+"""`arproj project --record/--view`: the session's bag read back with rosbags (independent of the writer)
+against the session's own pose, the rig's intrinsics and the frames it showed; the Rerun recording's entities."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from arproj.run.project import SessionOptions, run_session
+from arproj.run.view import SESSION_ENTITIES
 from geometry.poses import invert
 from scanner.wall import shipped_walls
 
@@ -50,7 +51,8 @@ def test_the_session_bag_holds_tf_camera_info_frames_and_gate(tmp_path, monkeypa
 
     monkeypatch.setattr(session_module.ProjectionSession, "update", update)
     result = run_session(SessionOptions(truth=shipped_walls()["small_test_wall"], sim=True, cycles=1,
-                                        record=tmp_path / "s.mcap"), say=lambda _: None)
+                                        record=tmp_path / "s.mcap", view=str(tmp_path / "s.rrd")),
+                         say=lambda _: None)
     assert (tmp_path / "metadata.yaml").is_file()
     out: dict[str, list] = {}
     with AnyReader([tmp_path]) as reader:
@@ -88,15 +90,23 @@ def test_the_session_bag_holds_tf_camera_info_frames_and_gate(tmp_path, monkeypa
                      for c in result["cycles"]]
 
 
-def test_a_bad_record_target_is_refused_in_one_line_before_any_work(tmp_path, monkeypatch, capsys):
+    from rerun.chunk import RrdReader
+
+    paths = set(RrdReader(tmp_path / "s.rrd").store().schema().entity_paths())  # --view FILE.rrd beside it
+    assert {f"/{e}" for e in SESSION_ENTITIES} <= paths, paths
+
+
+@pytest.mark.parametrize("args, message", [(["--record", "s.bag"], "a recording is an .mcap file"),
+                                           (["--view", "s.png"], "give `live` (a viewer) or a FILE.rrd")])
+def test_a_bad_record_target_is_refused_in_one_line_before_any_work(args, message, tmp_path, monkeypatch, capsys):
     import sys
 
     from arproj.cli import main
 
     monkeypatch.setattr(sys, "argv", ["arproj", "project", "--sim", "--truth", "demo_brick_wall", "--output",
-                                      str(tmp_path / "frames"), "--record", str(tmp_path / "s.bag")])
+                                      str(tmp_path / "frames"), *args])
     with pytest.raises(SystemExit) as exit_:
         main()
     err = capsys.readouterr().err.replace("\n", " ")
-    assert exit_.value.code == 2 and "a recording is an .mcap file" in err and "Traceback" not in err
+    assert exit_.value.code == 2 and message in err and "Traceback" not in err
     assert not (tmp_path / "frames").exists()  # refused before the session started
