@@ -82,10 +82,19 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         interactive: bool = typer.Option(False, "--interactive", help="After the first cycle, read commands "
                                          "from the terminal: aim X,Y | drill X,Y | check X,Y | update | "
                                          "estimate | status | quit."),
+        record: Path = typer.Option(None, "--record", help="Also write every cycle as ROS 2 messages into this "
+                                    ".mcap (tf, CameraInfo, the frame and the captures as PNG, the gate state); "
+                                    "metadata.yaml beside it."),
+        view: str = typer.Option(None, "--view", help="Show the session in a Rerun viewer (frames, check marks, "
+                                 "camera captures, gate state): `--view live` spawns the viewer, `--view "
+                                 "FILE.rrd` saves the recording instead."),
         as_json: bool = typer.Option(False, "--json", help="Print the session's results as JSON."),
     ) -> None:
         """Project the in-wall map onto the wall, pre-warped for the beamer, with a safety gate."""
         from arproj.run.project import SessionOptions, run_session
+        from arproj.run.watch import check_targets
+
+        check_targets(record, view)  # a bad --record or --view refused before any work
 
         if truth is not None:  # a shipped name or a file, checked before the session starts
             from scanner.wall import load_wall, wall_file
@@ -106,7 +115,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             follow=_points(follow, "--follow") if follow else [], cycles=cycles, output=output, window=window,
             screen=screen, head_url=head_url, laser_url=laser_url, left=left, right=right, wall_prior=wall_prior,
             head_fault=head_fault, commands=_stdin_lines() if interactive else None, site=site,
-            site_key=wall_key if site is not None else None)
+            site_key=wall_key if site is not None else None, record=record,
+            view=view)
         result = run_session(options, say=lambda text: err_console.print(text, highlight=False))
         if as_json:
             print(json.dumps(result, indent=2))

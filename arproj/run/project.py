@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -49,6 +50,8 @@ class SessionOptions:
     site: Path | None = None          # a site file (arproj-site/1): find wall `site_key` again by the laser
     site_key: str | None = None
     head_fault: str | None = None
+    view: str | None = None    # --view live | FILE.rrd: the session in Rerun (arproj.run.view.SessionView)
+    record: Path | None = None  # --record FILE.mcap: every cycle as ROS 2 messages (arproj.session.record)
     commands: Iterable[str] | None = None  # interactive: lines such as "aim 1.2,1.1", "drill 1.3,1.0", "update"
 
 
@@ -255,7 +258,24 @@ def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options:
     result: dict = {"cycles": [], "map": wall_map.source, "rig": rig.quality.get("source", "rig file")
                     if isinstance(rig.quality, dict) else "rig file",
                     "frames": str(options.output) if options.output else None}
-    with session_cls(rig, wall_map, robot, ctx=ctx) as session:
+    from arproj.session.record import Captures, SessionRecorder
+    from mapping.ros.bag import RosBag
+
+    watchers: list[Any] = []  # --record, --view: each told of every cycle
+    captures = Captures()
+    stack = contextlib.ExitStack()
+    with stack, session_cls(rig, wall_map, robot, ctx=ctx) as session:  # the watchers closed also on an error
+        if options.record is not None:
+            watchers.append(SessionRecorder(stack.enter_context(RosBag(options.record)), rig, captures))
+            result["record"] = str(options.record)
+        if options.view is not None:
+            from arproj.run.view import SessionView
+
+            view = SessionView(options.view, captures)
+            stack.callback(view.close)
+            watchers.append(view)
+        if watchers:
+            captures.watch(robot)
         x0, y0, x1, y1 = wall_map.extent
         # --cycles 0: keep updating (re-estimate on motion, verify, show) until interrupted (Ctrl-C)
         targets = options.follow or ([None] * options.cycles if options.cycles > 0 else itertools.repeat(None))
@@ -275,6 +295,8 @@ def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options:
                     except (DeviceError, InputError) as err:
                         say(f"[yellow]warning:[/] {err}")
             decision = session.update()
+            for watcher in watchers:
+                watcher.cycle(session, decision)
             cycle = {"cycle": k, "show_map": decision.show_map, "reasons": decision.reasons,
                      "bound_mm": None if not np.isfinite(decision.bound_m) else round(decision.bound_m * 1000, 3),
                      "frame_says": list(session.last_words)}
@@ -292,7 +314,7 @@ def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options:
             result["cycles"].append(cycle)
             say(f"cycle {k}: " + ("map shown" if decision.show_map else "WARNING: " + "; ".join(decision.reasons)))
         if options.commands is not None:
-            _interactive(session, options.commands, result, say)
+            _interactive(session, options.commands, result, say, watchers)
         reg = session.registration
         if reg is not None:
             result["registration"] = {"T_wall_from_projector": reg.T_wall_from_projector.tolist(),
@@ -308,7 +330,8 @@ COMMAND_HELP = ("commands: aim X,Y | drill X,Y | check X,Y | update | estimate (
                 "status | quit")
 
 
-def _interactive(session: object, commands: Iterable[str], result: dict, say: Callable[[str], None]) -> None:
+def _interactive(session: object, commands: Iterable[str], result: dict, say: Callable[[str], None],
+                 watchers: Iterable[Any] = ()) -> None:
     """Run typed commands; a bad command or a failing device is reported and the session goes on."""
     say(COMMAND_HELP)
     for line in commands:
@@ -333,6 +356,8 @@ def _interactive(session: object, commands: Iterable[str], result: dict, say: Ca
                 say(f"({x:.3f}, {y:.3f}) m: {session.drill_check((x, y)).message}")  # type: ignore[attr-defined]
             elif verb in ("update", "estimate"):
                 decision = session.update(force=verb == "estimate")  # type: ignore[attr-defined]
+                for watcher in watchers:
+                    watcher.cycle(session, decision)
                 result["cycles"].append({"cycle": len(result["cycles"]), "show_map": decision.show_map,
                                          "reasons": decision.reasons, "command": line.strip()})
                 say("map shown" if decision.show_map else "WARNING: " + "; ".join(decision.reasons))

@@ -183,3 +183,48 @@ class ScanView:
         self.images()
         self.rec.flush()
         self.rec.disconnect()
+
+
+SESSION_ENTITIES = ("projector/frame", "projector/check_marks", "cameras/left", "cameras/right", "gate")
+
+
+class SessionView:
+    """The projection session in Rerun (`arproj project --view`), by cycle (timeline `cycle`): the frame shown
+    (projector/frame), the closed loop's check marks in it (projector/check_marks: seen green, missed red), the
+    cameras' last captures (cameras/left, cameras/right) and the gate's state (gate, a text log)."""
+
+    def __init__(self, view: str, captures: Any) -> None:
+        check_target(view)
+        self.captures = captures
+        self.rec = rr.RecordingStream("arproj_project")
+        if view == LIVE:
+            self.rec.spawn()
+        else:
+            self.rec.save(view)
+        self.cycles = 0
+
+    def cycle(self, session: Any, decision: Any) -> None:
+        from arproj.session.record import gate_state
+        from arproj.session.registration import project_in_view
+        from geometry.poses import invert, transform_points
+
+        self.rec.set_time("cycle", sequence=self.cycles)
+        self.cycles += 1
+        if session.last_frame is not None:
+            self.rec.log("projector/frame", rr.Image(session.last_frame))
+        reg = session.registration
+        if reg is not None and reg.loop is not None and len(reg.loop.marks_xy):
+            marks = np.c_[reg.loop.marks_xy, np.zeros(len(reg.loop.marks_xy))]
+            uv = project_in_view(session.projector_intr, transform_points(invert(reg.T_wall_from_projector),
+                                                                          marks))[0]
+            colours = np.where(reg.loop.seen[:, None], [[0, 200, 0]], [[230, 40, 40]])
+            self.rec.log("projector/check_marks", rr.Points2D(uv, colors=colours, radii=4.0))
+        if self.captures.last is not None:
+            left, right = self.captures.last
+            self.rec.log("cameras/left", rr.Image(left))
+            self.rec.log("cameras/right", rr.Image(right))
+        self.rec.log("gate", rr.TextLog(gate_state(decision), level="INFO" if decision.show_map else "WARN"))
+
+    def close(self) -> None:
+        self.rec.flush()
+        self.rec.disconnect()

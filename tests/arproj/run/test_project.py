@@ -52,14 +52,20 @@ def test_dead_head_and_no_display_keep_the_session_up_with_a_warning(tmp_path, m
     assert np.array_equal(last[4, 640], [255, 40, 40])  # the red border of the warning
 
 
-def test_interactive_commands_aim_check_and_survive_bad_input():
+def test_interactive_commands_aim_check_and_survive_bad_input(tmp_path):
     said = []
     commands = ["check 1.18,0.9", "drill 1.5,1.2", "aim nonsense", "fly 1,2", "status", "quit", "update"]
-    result = run_session(SessionOptions(truth=shipped_walls()["demo_brick_wall"], sim=True, commands=commands),
-                         say=said.append)
+    result = run_session(SessionOptions(truth=shipped_walls()["demo_brick_wall"], sim=True, commands=commands,
+                                        record=tmp_path / "s.mcap"), say=said.append)
     assert any(s.startswith("(1.180, 0.900) m: keep away") for s in said)
     assert any("drill point (1.500, 1.200) m: safe" in s for s in said)
     assert any("could not read 'aim nonsense'" in s for s in said)
     assert any("unknown command 'fly'" in s for s in said)
     assert [c.get("command") for c in result["cycles"]] == [None, "drill 1.5,1.2"]  # "update" after quit: not run
     assert result["cycles"][-1]["show_map"]
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([tmp_path]) as reader:  # --record: the typed update is a cycle of the bag too
+        gates = [reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages()
+                 if c.topic == "/gate"]
+    assert gates == ["MAP SHOWN", "MAP SHOWN"]
