@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from calibration.boards import as_gray
+from geometry.distortion import distort_normalized
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
 from geometry.threads import single_threaded
@@ -145,8 +146,11 @@ class _Rectifier:
         return (projector_px - self.origin) * self.scale - 0.5
 
     def camera_px(self, H: NDArray[np.float64], projector_norm: NDArray[np.float64]) -> NDArray[np.float64]:
-        mapped = _apply_h(H, projector_norm)
-        return self.camera.project(np.column_stack([mapped, np.ones(len(mapped))]))
+        # the lens model over the whole array (geometry.distortion, checked against cv2.projectPoints): the
+        # coarse map's thousands of points cost a fraction of what cv2.projectPoints takes
+        xy = distort_normalized(_apply_h(H, projector_norm), self.camera.dist_array)
+        K = self.camera.K
+        return np.column_stack([K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2], K[1, 1] * xy[:, 1] + K[1, 2]])
 
     def warp(self, gray: NDArray[np.float32], H: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
         """(rectified image, valid mask) for the current H."""
@@ -280,7 +284,8 @@ def _detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, project
         whole = cv2.erode(valid.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_RECT, (2 * r + 1, 2 * r + 1)))
         idx = idx[whole[iy[idx], ix[idx]] > 0]
         if subset is None:
-            kept_fraction = 1.0 if max_corners is None else min(1.0, max_corners / len(idx))
+            # no corner inside: nothing to thin out (and no division by zero)
+            kept_fraction = 1.0 if max_corners is None or len(idx) == 0 else min(1.0, max_corners / len(idx))
             subset = _even_subset(pattern, kept_fraction)
         idx = idx[subset[idx]]
         if len(idx) == 0:
