@@ -1,7 +1,6 @@
 """geometry.threads.single_threaded: OpenCV and BLAS on one thread inside, the previous counts back after."""
 
 import cv2
-import numpy as np
 import scipy.linalg  # noqa: F401  (its own BLAS, which single_threaded limits too)
 from threadpoolctl import threadpool_info
 
