@@ -15,8 +15,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import cv2
@@ -26,6 +24,7 @@ from numpy.typing import NDArray
 from calibration.boards import as_gray
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
+from geometry.threads import single_threaded
 from wallpose import limits
 from wallpose.pattern import MARKER_DICTIONARY, CheckerPattern
 
@@ -146,8 +145,8 @@ class _Rectifier:
         return (projector_px - self.origin) * self.scale - 0.5
 
     def camera_px(self, H: NDArray[np.float64], projector_norm: NDArray[np.float64]) -> NDArray[np.float64]:
-        mapped = _apply_h(H, projector_norm)
-        return self.camera.project(np.column_stack([mapped, np.ones(len(mapped))]))
+        # vectorised (the coarse map has thousands of points): a fraction of cv2.projectPoints' cost
+        return self.camera.pixels_of_normalized(_apply_h(H, projector_norm))
 
     def warp(self, gray: NDArray[np.float32], H: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
         """(rectified image, valid mask) for the current H."""
@@ -210,19 +209,6 @@ def _upsample(coarse: NDArray[np.float32], step: int, shape: tuple[int, ...]) ->
                       dtype=np.float32)[:h, :w]
 
 
-@contextmanager
-def single_threaded_opencv() -> Iterator[None]:
-    """OpenCV on one thread for a while. Its calls here work on images of a few hundred pixels, where handing
-    the work to a thread pool costs more CPU (waking and waiting) than it saves; on a shared robot computer the
-    CPU per estimate is what counts. The previous thread count is restored afterwards."""
-    previous = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        yield
-    finally:
-        cv2.setNumThreads(previous)
-
-
 # Kronecker (R2) sequence constants: frac(i a1 + j a2) spreads evenly over [0, 1) across any part of the grid
 _R2 = (0.7548776662466927, 0.5698402909980532)
 
@@ -243,7 +229,7 @@ def detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, projecto
 
     max_corners: when more corners are in view, a spatially even subset of about this many is refined (the
     plane's error grows a little and its reported bounds with it, for about half the work); None: all."""
-    with single_threaded_opencv():
+    with single_threaded():
         return _detect(image, pattern, camera, projector, camera_name, max_corners)
 
 
@@ -294,7 +280,8 @@ def _detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, project
         whole = cv2.erode(valid.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_RECT, (2 * r + 1, 2 * r + 1)))
         idx = idx[whole[iy[idx], ix[idx]] > 0]
         if subset is None:
-            kept_fraction = 1.0 if max_corners is None else min(1.0, max_corners / len(idx))
+            # no corner inside: nothing to thin out (and no division by zero)
+            kept_fraction = 1.0 if max_corners is None or len(idx) == 0 else min(1.0, max_corners / len(idx))
             subset = _even_subset(pattern, kept_fraction)
         idx = idx[subset[idx]]
         if len(idx) == 0:

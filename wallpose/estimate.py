@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.poses import rotation_angle_deg
+from geometry.threads import single_threaded
 from wallpose import limits
 from wallpose.detect import Detection, detect
 from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
@@ -90,9 +91,10 @@ def estimate_plane(image_left: NDArray, image_right: NDArray, pattern: CheckerPa
     uncertainty: how well the rig is known (default Uncertainty()). Raises NotEnoughEvidenceError with the reason
     when the images do not support a trustworthy plane.
     """
-    det_l = detect(image_left, pattern, views.camera_left, views.projector, "camera_left")
-    det_r = detect(image_right, pattern, views.camera_right, views.projector, "camera_right")
-    return estimate_from_detections(det_l, det_r, pattern, views, uncertainty, seed)
+    with single_threaded():
+        det_l = detect(image_left, pattern, views.camera_left, views.projector, "camera_left")
+        det_r = detect(image_right, pattern, views.camera_right, views.projector, "camera_right")
+        return estimate_from_detections(det_l, det_r, pattern, views, uncertainty, seed)
 
 
 def _describe(det: Detection) -> str:
@@ -101,7 +103,14 @@ def _describe(det: Detection) -> str:
 
 def estimate_from_detections(det_l: Detection, det_r: Detection, pattern: CheckerPattern, views: ViewRig,
                              uncertainty: Uncertainty | None = None, seed: int = 0) -> PlaneEstimate:
-    """estimate_plane after detection (so a caller can reuse detections)."""
+    """estimate_plane after detection (so a caller can reuse detections). Runs BLAS single-threaded (see
+    geometry.threads): the fit's small normal equations cost several times the CPU on a thread pool."""
+    with single_threaded():
+        return _estimate_from_detections(det_l, det_r, pattern, views, uncertainty, seed)
+
+
+def _estimate_from_detections(det_l: Detection, det_r: Detection, pattern: CheckerPattern, views: ViewRig,
+                              uncertainty: Uncertainty | None, seed: int) -> PlaneEstimate:
     u = Uncertainty() if uncertainty is None else uncertainty
     n = pattern.n_corners
     T_rl = views.T_camera_right_from_camera_left

@@ -85,3 +85,17 @@ def test_scaled_keeps_the_optics() -> None:
     p = np.array([[0.1, -0.2, 2.0]])
     # Exact rescaling: float64 round-off on ~500 px coordinates is ~1e-13 px.
     np.testing.assert_allclose((intr.project(p) + 0.5) * 0.5 - 0.5, half.project(p), atol=1e-12)
+
+
+LENSES = [(), (-0.25, 0.09, 0.001, -0.0005, -0.01), (0.9, 0.2, 0.0012, -0.0007, 0.01, 1.1, 0.35, 0.03)]
+
+
+@pytest.mark.parametrize("dist", LENSES)
+def test_pixels_of_normalized_is_project(dist: tuple[float, ...]) -> None:
+    intr = Intrinsics(900, 905, 700.3, 620.7, 1280, 800, dist)
+    rng = np.random.default_rng(1)
+    p = np.column_stack([rng.uniform(-0.6, 0.6, (200, 2)), rng.uniform(0.8, 3.0, 200)])
+    ours = intr.pixels_of_normalized(p[:, :2] / p[:, 2:])
+    # the same formula in float64, OpenCV adding its terms in another order: agreement to ~1e-13 px
+    np.testing.assert_allclose(ours, intr.project(p), rtol=0, atol=1e-9)
+    assert intr.pixels_of_normalized(p[:6, :2].reshape(2, 3, 2)).shape == (2, 3, 2)
