@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import json
 import sys
+from collections.abc import Callable
 
 import typer
 
@@ -12,24 +13,47 @@ from arproj.bench import QUICK_CAVEAT, BenchTable, benchmark_docs, headline_tabl
 from arproj.console import console, err_console
 
 
-def _command(name: str, doc: str):
-    def command(
-        as_json: bool = typer.Option(False, "--json", help="Print the results as JSON instead of a table."),
-        quick: bool = typer.Option(False, "--quick", help="Fewer trials, for a fast check (figures are "
-                                   "noisier; targets are judged on the full run)."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the simulated inputs."),
-    ) -> None:
-        # Whatever a benchmark says while it runs goes to stderr: stdout carries only the table (or the JSON).
-        import importlib  # the benchmark (scipy, OpenCV, GL) only when it runs: `--help` stays fast
+def _run_and_print(name: str, as_json: bool, quick: bool, seed: int, **options: object) -> None:
+    # Whatever a benchmark says while it runs goes to stderr: stdout carries only the table (or the JSON).
+    import importlib  # the benchmark (scipy, OpenCV, GL) only when it runs: `--help` stays fast
 
-        module = importlib.import_module(f"arproj.bench.{name}")
-        with contextlib.redirect_stdout(sys.stderr):
-            table: BenchTable = module.run(quick=quick, seed=seed)
-        table.environment["quick"] = quick
-        if as_json:
-            print(table.to_json())
-        else:
-            table.print()
+    module = importlib.import_module(f"arproj.bench.{name}")
+    with contextlib.redirect_stdout(sys.stderr):
+        table: BenchTable = module.run(quick=quick, seed=seed, **options)
+    table.environment["quick"] = quick
+    if as_json:
+        print(table.to_json())
+    else:
+        table.print()
+
+
+_JSON_HELP = "Print the results as JSON instead of a table."
+_QUICK_HELP = "Fewer trials, for a fast check (figures are noisier; targets are judged on the full run)."
+_SEED_HELP = "Seed of the simulated inputs."
+
+
+def _command(name: str, doc: str) -> Callable[..., None]:
+    def command(
+        as_json: bool = typer.Option(False, "--json", help=_JSON_HELP),
+        quick: bool = typer.Option(False, "--quick", help=_QUICK_HELP),
+        seed: int = typer.Option(0, "--seed", help=_SEED_HELP),
+    ) -> None:
+        _run_and_print(name, as_json, quick, seed)
+
+    command.__doc__ = doc.strip()
+    return command
+
+
+def _calibration_command(doc: str) -> Callable[..., None]:
+    def command(
+        as_json: bool = typer.Option(False, "--json", help=_JSON_HELP),
+        quick: bool = typer.Option(False, "--quick", help=_QUICK_HELP),
+        seed: int = typer.Option(0, "--seed", help=_SEED_HELP),
+        live_seeds: int | None = typer.Option(None, "--live-seeds", min=1, help="Seeds of the simulated live "
+                                              "calibration (seed, seed+1, …; about 100 s each); default 20, "
+                                              "--quick 1."),
+    ) -> None:
+        _run_and_print("calibration", as_json, quick, seed, live_seeds=live_seeds)
 
     command.__doc__ = doc.strip()
     return command
@@ -38,7 +62,7 @@ def _command(name: str, doc: str):
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     modules = benchmark_docs()
     for name, doc in modules.items():
-        bench_app.command(name)(_command(name, doc))
+        bench_app.command(name)(_calibration_command(doc) if name == "calibration" else _command(name, doc))
 
     @bench_app.command("all")
     def bench_all(
