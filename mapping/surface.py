@@ -270,8 +270,9 @@ def wall_mesh_from_range_images(views: list[RangeView], bounds: tuple[float, flo
                                 margin_m: float = 0.05) -> trimesh.Trimesh:
     """The measured surface in the wall frame, cropped to bounds (x_min, y_min, x_max, y_max) ± margin in x
     and y only, so other surfaces in front of the wall (the floor at its foot, clutter) come along:
-    split_wall_faces tells them apart (wall.glb draws them dark). Views triangulated and merged; without T_world_from_wall the largest wall facing the first camera is
-    recognised and its lower-left inlier corner taken as the origin."""
+    split_wall_faces tells them apart (wall.glb draws them dark). Views triangulated and merged; without
+    T_world_from_wall the largest wall facing the first camera is recognised and its lower-left inlier corner
+    taken as the origin."""
     merged = merge_meshes([triangulate_range_image(d, intr, T) for d, intr, T in views])
     if T_world_from_wall is None:
         walls = walls_in_mesh(merged, viewpoint=views[0][2][:3, 3])

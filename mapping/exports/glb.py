@@ -28,11 +28,11 @@ import trimesh
 from numpy.typing import NDArray
 
 from geometry import provenance
+from geometry.errors import InputError
 from mapping import mapfile
 from mapping.exports.common import ExportJob, looked
 from mapping.fusion import CLASSES, class_map
 from mapping.pipeline import MapResult
-from geometry.errors import InputError
 from mapping.surface import flat_wall_mesh, split_wall_faces
 from mapping.texture import bake_texture, textured_wall_mesh
 
