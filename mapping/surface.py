@@ -169,6 +169,7 @@ def flat_wall_mesh(x_min: float, y_min: float, x_max: float, y_max: float, step_
 
 WALL_SURFACE_GATE_M = 0.05   # a face farther than this from a wall's plane is another surface (floor, clutter)
 WALL_FACING_DEG = 45.0       # … and one turned more than this from the wall's normal (the floor at its foot)
+FACING_SMOOTHING_RINGS = 2   # … judged by the faces around it, this many vertex rings out (range noise)
 OTHER_SURFACE = -1           # classify_faces' label of a face on no given wall: not mapped, unknown
 
 
@@ -177,8 +178,9 @@ def classify_faces(mesh: trimesh.Trimesh, T_frame_from_walls: list[NDArray[np.fl
     """For each face of mesh (in some frame F), the index of the wall it lies on, or OTHER_SURFACE.
 
     T_frame_from_walls: each wall's frame in F (wall surface at its z = 0). A face lies on a wall when its
-    three vertices are within gate_m of the wall's plane and its normal is within facing_deg of the wall's
-    normal (either side: the winding of a merged mesh is not trusted). A face on two walls' planes (along the
+    three vertices are within gate_m of the wall's plane and its normal — or that averaged over the faces
+    around it, as one face's is range noise — is within facing_deg of the wall's normal (either side: the winding of a
+    merged mesh is not trusted). A face on two walls' planes (along the
     inside corner) goes to the one its centroid is nearer. Everything else (floor, ceiling, clutter, a wall
     not given) is OTHER_SURFACE: its map is unknown.
     """
@@ -195,11 +197,28 @@ def classify_faces(mesh: trimesh.Trimesh, T_frame_from_walls: list[NDArray[np.fl
         n, origin = T[:3, 2], T[:3, 3]
         dist = (v - origin) @ n  # signed distance of each vertex to the wall plane
         near = (np.abs(dist[f]) < gate_m).all(axis=1)
-        facing = np.abs(normals @ n) > cos_gate
+        own = np.abs(normals @ n)
+        facing = np.maximum(own, _neighbourhood_mean(mesh, own)) > cos_gate  # own: a face by the corner line
         centroid_dist = np.abs(dist[f].mean(axis=1))
         take = near & facing & (centroid_dist < best)
         labels[take], best[take] = k, centroid_dist[take]
     return labels
+
+
+def _neighbourhood_mean(mesh: trimesh.Trimesh, per_face: NDArray[np.float64],
+                        rings: int = FACING_SMOOTHING_RINGS) -> NDArray[np.float64]:
+    """per_face averaged (area-weighted) over the faces around each face, `rings` vertex rings out. A small
+    face's own normal is range noise over a pixel's footprint (a wall face 1.3 m away tilts 18° at the median,
+    more than 45° for about 1 in 200); its neighbourhood's is the surface's."""
+    incidence = mesh.faces_sparse  # (vertices, faces)
+    area = np.asarray(mesh.area_faces, dtype=np.float64)
+    faces = np.asarray(mesh.faces)
+    value = per_face
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for _ in range(rings):
+            at_vertex = (incidence @ (value * area)) / (incidence @ area)
+            value = np.nan_to_num(at_vertex, nan=0.0)[faces].mean(axis=1)
+    return value
 
 
 def split_wall_faces(mesh: trimesh.Trimesh, gate_m: float = WALL_SURFACE_GATE_M,
