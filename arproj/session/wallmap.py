@@ -150,9 +150,9 @@ def _wall_and_other_meshes(loaded: object, path: Path) -> tuple[trimesh.Trimesh,
         textured = [g for g in geometries if getattr(g.visual, "kind", None) == "texture"]
         rest = [g for g in geometries if getattr(g.visual, "kind", None) != "texture"]
         if len(textured) == 1 and len(rest) <= 1:
-            mesh = _checked_mesh(textured[0], path)
-            return mesh, _checked_mesh(rest[0], path) if rest else None
+            return _checked_mesh(textured[0], path), _checked_mesh(rest[0], path) if rest else None
         mesh = geometries[0] if len(geometries) == 1 else trimesh.util.concatenate(geometries)
+        assert isinstance(mesh, trimesh.Trimesh)  # meshes concatenate to a mesh (trimesh types it as Geometry)
     elif isinstance(loaded, trimesh.Trimesh):
         mesh = loaded
     else:
@@ -169,18 +169,23 @@ def _checked_mesh(mesh: trimesh.Trimesh, path: Path) -> trimesh.Trimesh:
     return mesh
 
 
+def mesh_texture(mesh: trimesh.Trimesh) -> NDArray[np.uint8] | None:
+    """The RGBA image (h, w, 4) a textured mesh's UVs point into (None: no UVs or no image)."""
+    visual = mesh.visual
+    if getattr(visual, "kind", None) != "texture" or getattr(visual, "uv", None) is None:
+        return None
+    material = getattr(visual, "material", None)
+    image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
+    return None if image is None else np.asarray(image.convert("RGBA"), dtype=np.uint8)
+
+
 def _texture_and_uv_map(mesh: trimesh.Trimesh, path: Path
                         ) -> tuple[NDArray[np.uint8] | None, NDArray[np.float64] | None]:
     """The mesh's RGBA texture and the affine map wall (x, y) → uv it uses, when the UVs are affine in x, y."""
-    visual = mesh.visual
-    uv = getattr(visual, "uv", None)
-    if getattr(visual, "kind", None) != "texture" or uv is None:
+    rgba = mesh_texture(mesh)
+    if rgba is None:
         return None, None
-    material = visual.material
-    image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
-    if image is None:
-        return None, None
-    rgba = np.asarray(image.convert("RGBA"), dtype=np.uint8)
+    uv = np.asarray(getattr(mesh.visual, "uv", None), dtype=np.float64)
     xy1 = np.column_stack([mesh.vertices[:, :2], np.ones(len(mesh.vertices))])
     A, *_ = np.linalg.lstsq(xy1, np.asarray(uv, dtype=np.float64), rcond=None)
     residual = np.abs(xy1 @ A - uv).max() if len(uv) else np.inf
