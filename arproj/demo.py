@@ -48,8 +48,6 @@ ROBOT_MIN_DISTANCE_M = 2.0     # closer, a low wall needs more head tilt than th
 IMAGE_HALF_WIDTH_PER_M = 0.385  # half the beamer image's width / height per metre of throw (the default site's
 IMAGE_HALF_HEIGHT_PER_M = 0.25  #   throw ratio 1.3, 16:10)
 AIM_EDGE_CLEARANCE_M = 0.05    # the image stays this far off the floor and the room's corner (one wall only)
-WALL_SURFACE_GATE_M = 0.05     # mesh faces farther than this from the wall plane are other surfaces (the floor)
-WALL_FACING_DEG = 45.0         # … and faces turned more than this from the wall's normal (the floor at its foot)
 COVERAGE_CELL_M = 0.05         # mesh coverage: share of the mapped area's 5 cm cells holding a mesh vertex
 RANGE_VIEW_DISTANCE_M = 1.5    # range camera in front of the wall: its noise grows as z² (3.4 mm σ at 1.5 m)
 RANGE_FOOTPRINT_PER_M = (1.11, 0.83)  # the default site's range camera (58° × 45°) sees this much per metre
@@ -280,7 +278,7 @@ def stage_mesh(ctx: DemoContext) -> None:
     """Range images of the wall → merged surface mesh in the wall frame → textured wall.glb (and a view of it)."""
     from arproj.session.wallmap import load_wall_map
     from mapping.exports.glb import write_wall_glb
-    from mapping.surface import wall_mesh_from_range_images
+    from mapping.surface import split_wall_faces, wall_mesh_from_range_images
     from render import MeshRenderer
 
     _, result = ctx.map_data()
@@ -298,25 +296,24 @@ def stage_mesh(ctx: DemoContext) -> None:
     with warnings.catch_warnings():  # all-NaN pixel blocks (no return) are expected at the views' edges
         warnings.simplefilter("ignore", RuntimeWarning)
         mesh = wall_mesh_from_range_images(views, result.bounds, T_room_from_wall)
-    # The crop to the mapped area is in x, y only: the floor in front of the wall's foot comes along. Keep the
-    # faces near the wall frame's plane (the frame the mesh is expressed in).
-    near = np.abs(mesh.vertices[:, 2]) < WALL_SURFACE_GATE_M
-    facing = np.abs(mesh.face_normals[:, 2]) > np.cos(np.radians(WALL_FACING_DEG))  # the floor faces up
-    keep = near[mesh.faces].all(axis=1) & facing
-    other_surfaces = int((~keep).sum())
-    mesh.update_faces(keep)
-    mesh.remove_unreferenced_vertices()
+    # The crop to the mapped area is in x, y only: the floor in front of the wall's foot comes along. wall.glb
+    # keeps it as a dark, untextured surface (no map: unknown); only the wall's faces carry the map.
+    wall_faces, other = split_wall_faces(mesh)
     write_wall_glb(result, ctx.out / "map" / "wall.glb", mesh)
-    off_plane = np.abs(mesh.vertices[:, 2])  # the true wall is the plane z = 0 of the wall frame
+    off_plane = np.abs(wall_faces.vertices[:, 2])  # the true wall is the plane z = 0 of the wall frame
     ctx.figures["mesh"] = {"range views": len(views), "vertices": len(mesh.vertices), "faces": len(mesh.faces),
-                           "faces dropped as other surfaces (floor)": other_surfaces,
-                           "mapped area covered %": _coverage_percent(mesh.vertices, result.bounds),
+                           "faces textured (on the wall)": len(wall_faces.faces),
+                           "faces dark (other surfaces: floor)": 0 if other is None else len(other.faces),
+                           "mapped area covered %": _coverage_percent(wall_faces.vertices, result.bounds),
                            "surface median off the true wall mm": float(1000 * np.median(off_plane)),
                            "surface p95 off the true wall mm": float(1000 * np.percentile(off_plane, 95)),
                            "surface RMS off the true wall mm": float(1000 * np.sqrt(np.mean(off_plane ** 2))),
                            "surface max off the true wall mm": float(1000 * off_plane.max())}
     # A look at the textured mesh from the room, 40° to the side.
-    textured = load_wall_map(ctx.out / "map" / "wall.glb").mesh
+    import trimesh
+
+    loaded = load_wall_map(ctx.out / "map" / "wall.glb")
+    textured = trimesh.Scene([loaded.mesh] + ([loaded.other] if loaded.other is not None else []))
     from geometry.intrinsics import Intrinsics
 
     intr = Intrinsics.from_fov(960, 600, 60.0)

@@ -167,6 +167,75 @@ def flat_wall_mesh(x_min: float, y_min: float, x_max: float, y_max: float, step_
     return trimesh.Trimesh(vertices=verts, faces=faces, process=False)
 
 
+WALL_SURFACE_GATE_M = 0.05   # a face farther than this from a wall's plane is another surface (floor, clutter)
+WALL_FACING_DEG = 45.0       # … and one turned more than this from the wall's normal (the floor at its foot)
+FACING_SMOOTHING_RINGS = 2   # … judged by the faces around it, this many vertex rings out (range noise)
+OTHER_SURFACE = -1           # classify_faces' label of a face on no given wall: not mapped, unknown
+
+
+def classify_faces(mesh: trimesh.Trimesh, T_frame_from_walls: list[NDArray[np.float64]],
+                   gate_m: float = WALL_SURFACE_GATE_M, facing_deg: float = WALL_FACING_DEG) -> NDArray[np.int64]:
+    """For each face of mesh (in some frame F), the index of the wall it lies on, or OTHER_SURFACE.
+
+    T_frame_from_walls: each wall's frame in F (wall surface at its z = 0). A face lies on a wall when its
+    three vertices are within gate_m of the wall's plane and its normal — or that averaged over the faces
+    around it, as one face's is range noise — is within facing_deg of the wall's normal (either side: the winding of a
+    merged mesh is not trusted). A face on two walls' planes (along the
+    inside corner) goes to the one its centroid is nearer. Everything else (floor, ceiling, clutter, a wall
+    not given) is OTHER_SURFACE: its map is unknown.
+    """
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    labels = np.full(len(f), OTHER_SURFACE, np.int64)
+    if not len(f):
+        return labels
+    normals = np.asarray(mesh.face_normals, dtype=np.float64)
+    best = np.full(len(f), np.inf)
+    cos_gate = np.cos(np.radians(facing_deg))
+    for k, T in enumerate(T_frame_from_walls):
+        T = np.asarray(T, dtype=np.float64)
+        n, origin = T[:3, 2], T[:3, 3]
+        dist = (v - origin) @ n  # signed distance of each vertex to the wall plane
+        near = (np.abs(dist[f]) < gate_m).all(axis=1)
+        own = np.abs(normals @ n)
+        facing = np.maximum(own, _neighbourhood_mean(mesh, own)) > cos_gate  # own: a face by the corner line
+        centroid_dist = np.abs(dist[f].mean(axis=1))
+        take = near & facing & (centroid_dist < best)
+        labels[take], best[take] = k, centroid_dist[take]
+    return labels
+
+
+def _neighbourhood_mean(mesh: trimesh.Trimesh, per_face: NDArray[np.float64],
+                        rings: int = FACING_SMOOTHING_RINGS) -> NDArray[np.float64]:
+    """per_face averaged (area-weighted) over the faces around each face, `rings` vertex rings out. A small
+    face's own normal is range noise over a pixel's footprint (a wall face 1.3 m away tilts 18° at the median,
+    more than 45° for about 1 in 200); its neighbourhood's is the surface's."""
+    incidence = mesh.faces_sparse  # (vertices, faces)
+    area = np.asarray(mesh.area_faces, dtype=np.float64)
+    faces = np.asarray(mesh.faces)
+    value = per_face
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for _ in range(rings):
+            at_vertex = (incidence @ (value * area)) / (incidence @ area)
+            value = np.nan_to_num(at_vertex, nan=0.0)[faces].mean(axis=1)
+    return value
+
+
+def split_wall_faces(mesh: trimesh.Trimesh, gate_m: float = WALL_SURFACE_GATE_M,
+                     facing_deg: float = WALL_FACING_DEG) -> tuple[trimesh.Trimesh, trimesh.Trimesh | None]:
+    """A wall-frame mesh split into the faces on the wall (z ≈ 0, facing ±z) and all other faces (None if
+    there are none): the wall's map textures the first; the second is measured surface with no map."""
+    on_wall = classify_faces(mesh, [np.eye(4)], gate_m, facing_deg) == 0
+    return _faces_subset(mesh, on_wall), (_faces_subset(mesh, ~on_wall) if (~on_wall).any() else None)
+
+
+def _faces_subset(mesh: trimesh.Trimesh, keep: NDArray[np.bool_]) -> trimesh.Trimesh:
+    out = trimesh.Trimesh(vertices=np.asarray(mesh.vertices).copy(), faces=np.asarray(mesh.faces)[keep].copy(),
+                          process=False)
+    out.remove_unreferenced_vertices()
+    return out
+
+
 MAX_RANGE_VIEWS = 1000
 MAX_RANGE_PIXELS = 4096  # per side of one range image
 MAX_RANGE_M = 100.0      # depths and camera positions, metres
@@ -218,9 +287,11 @@ def load_range_images(path: str) -> tuple[list[RangeView], NDArray[np.float64] |
 def wall_mesh_from_range_images(views: list[RangeView], bounds: tuple[float, float, float, float],
                                 T_world_from_wall: NDArray[np.float64] | None = None,
                                 margin_m: float = 0.05) -> trimesh.Trimesh:
-    """The measured wall surface in the wall frame, cropped to bounds (x_min, y_min, x_max, y_max) ± margin:
-    views triangulated and merged; without T_world_from_wall the largest wall facing the first camera is
-    recognised and its lower-left inlier corner taken as the origin."""
+    """The measured surface in the wall frame, cropped to bounds (x_min, y_min, x_max, y_max) ± margin in x
+    and y only, so other surfaces in front of the wall (the floor at its foot, clutter) come along:
+    split_wall_faces tells them apart (wall.glb draws them dark). Views triangulated and merged; without
+    T_world_from_wall the largest wall facing the first camera is recognised and its lower-left inlier corner
+    taken as the origin."""
     merged = merge_meshes([triangulate_range_image(d, intr, T) for d, intr, T in views])
     if T_world_from_wall is None:
         walls = walls_in_mesh(merged, viewpoint=views[0][2][:3, 3])

@@ -90,7 +90,9 @@ class MapProjector:
         if key == self._keys[which]:
             return
         raster = make()
-        self._renderers[which].set_mesh(textured_mesh(self.wall_map, raster))
+        mesh = textured_mesh(self.wall_map, raster)
+        other = self.wall_map.other  # measured surfaces with no map (floor, clutter): drawn black, they hide the
+        self._renderers[which].set_mesh(mesh if other is None else trimesh.Scene([mesh, other]))  # wall behind
         self._rasters[which], self._keys[which] = raster, key
 
     def set_overlays(self, registration_sigma_m: float, drill_xy: ArrayLike | None = None,

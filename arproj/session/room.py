@@ -11,11 +11,16 @@ drawn: dark, unknown, never another wall's colours.
     walls = [RoomWall.of(0, map0, T_room_from_wall0, (w0, h0)), RoomWall.of(1, map1, T_room_from_wall1, (w1, h1))]
     with RoomSession(rig, walls, robot) as s:
         verdicts = s.update()          # {wall index: WallVerdict}
+
+The walls' maps may come from one measured room mesh (room.glb, mapping.exports.glb.write_room_glb): each
+wall's faces with its own map, the faces on no mapped wall (floor, ceiling, clutter) drawn black, so they hide
+what is behind them and show nothing (load_room_map, RoomSession(..., other=room_map.other)).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -26,7 +31,9 @@ from arproj.session import tolerances as tol
 from arproj.session.projection import check_mark_raster, textured_mesh
 from arproj.session.robot_io import RobotIO
 from arproj.session.session import CLOSED_LOOP_MARKS, ProjectionSession
-from arproj.session.wallmap import WallMap
+from arproj.session.wallmap import MAX_GLB_BYTES, MAX_WALL_M, WallMap, mesh_texture
+from geometry.errors import InputError
+from geometry.inputs import check_file
 from geometry.intrinsics import Intrinsics
 from geometry.poses import invert, make_pose, transform_points
 from geometry.rig import Rig
@@ -90,12 +97,83 @@ def _shift(xy: NDArray[np.float64]) -> NDArray[np.float64]:
     return make_pose(None, [float(xy[0]), float(xy[1]), 0.0])
 
 
+@dataclass
+class RoomMap:
+    """room.glb read back: each mapped wall (its faces in its wall frame, its tile of the atlas as the map's
+    texture) and the other measured surfaces in the room frame (None: none)."""
+
+    walls: list[RoomWall]
+    other: trimesh.Trimesh | None
+    source: str = ""
+
+
+def load_room_map(glb_path: str | Path) -> RoomMap:
+    """Read room.glb (mapping.exports.glb.write_room_glb). InputError names the file and what is wrong."""
+    path = Path(glb_path)
+    redo = "re-export it with mapping.exports.glb.write_room_glb"
+    check_file(path, "room map (room.glb)", MAX_GLB_BYTES, redo)
+    try:
+        loaded = trimesh.load(path, file_type="glb", process=False)
+    except Exception as err:  # trimesh raises many exception types for bad files
+        raise InputError(f"{path}: not a readable GLB mesh ({type(err).__name__}: {err})", redo) from None
+    extras = loaded.metadata.get("extras") if isinstance(loaded, trimesh.Scene) else None
+    if not isinstance(loaded, trimesh.Scene) or not isinstance(extras, dict) or extras.get("frame") != "room" \
+            or not isinstance(extras.get("walls"), list):
+        raise InputError(f"{path}: not a room map (its extras name no room frame and walls)", redo)
+    geometries = {name: g for name, g in loaded.geometry.items() if isinstance(g, trimesh.Trimesh)}
+    textured = [g for g in geometries.values() if getattr(g.visual, "kind", None) == "texture"]
+    others = [g for g in geometries.values() if getattr(g.visual, "kind", None) != "texture" and len(g.faces)]
+    if len(textured) != 1 or len(others) > 1:
+        raise InputError(f"{path}: a room map holds one textured mesh and at most one other; this one holds "
+                         f"{len(textured)} and {len(others)}", redo)
+    mesh = textured[0]
+    atlas = mesh_texture(mesh)
+    if atlas is None or not len(mesh.faces) or not np.all(np.isfinite(mesh.vertices)) or \
+            np.abs(mesh.vertices).max() > MAX_WALL_M:
+        raise InputError(f"{path}: the walls' mesh has no texture, no faces or vertices beyond {MAX_WALL_M:g} m",
+                         redo)
+    height, width = atlas.shape[:2]
+    uv = np.asarray(getattr(mesh.visual, "uv", None), dtype=np.float64)[np.asarray(mesh.faces)].mean(axis=1)
+    col, row = uv[:, 0] * width, (1.0 - uv[:, 1]) * height  # each face's texel in the atlas
+    walls: list[RoomWall] = []
+    for i, entry in enumerate(extras["walls"]):
+        try:
+            index = int(entry["index"])
+            T = np.asarray(entry["T_room_from_wall"], dtype=np.float64).reshape(4, 4)
+            size = tuple(float(v) for v in entry["size_m"])
+            ex0, ey0, ex1, ey1 = (float(v) for v in entry["extent_m"])
+            c0, r0, tw, th = (int(v) for v in entry["tile_px"])
+        except (KeyError, TypeError, ValueError):
+            raise InputError(f"{path}: extras.walls[{i}] lacks index, T_room_from_wall, size_m, extent_m or "
+                             "tile_px", redo) from None
+        if not (c0 >= 0 and r0 >= 0 and c0 + tw <= width and r0 + th <= height and tw > 0 and th > 0
+                and ex1 > ex0 and ey1 > ey0 and len(size) == 2 and np.all(np.isfinite(T))):
+            raise InputError(f"{path}: extras.walls[{i}] (wall {index}): its tile or extent is not in the atlas",
+                             redo)
+        own = (col >= c0) & (col < c0 + tw) & (row >= r0) & (row < r0 + th)
+        if not own.any():
+            raise InputError(f"{path}: no face of the mesh lies in wall {index}'s tile of the atlas", redo)
+        faces = np.asarray(mesh.faces)[own]
+        used, inverse = np.unique(faces, return_inverse=True)
+        local = transform_points(invert(T), np.asarray(mesh.vertices)[used])
+        wall_mesh = trimesh.Trimesh(local, inverse.reshape(-1, 3), process=False)
+        uv_from_xy = np.array([[1.0 / (ex1 - ex0), 0.0, -ex0 / (ex1 - ex0)],
+                               [0.0, 1.0 / (ey1 - ey0), -ey0 / (ey1 - ey0)]])
+        texture = np.ascontiguousarray(atlas[r0:r0 + th, c0:c0 + tw])
+        wall_map = WallMap(wall_mesh, texture=texture, uv_from_xy=uv_from_xy, source=f"{path} wall {index}")
+        walls.append(RoomWall(index, wall_map, T, (size[0], size[1])))
+    other = others[0] if others else None
+    return RoomMap(walls, other, str(path))
+
+
 class RoomProjector:
     """Renders one beamer frame of several walls' rasters in the room frame. Owns its renderers; use `with`."""
 
-    def __init__(self, walls: list[RoomWall], projector: Intrinsics, ctx: object | None = None) -> None:
+    def __init__(self, walls: list[RoomWall], projector: Intrinsics, ctx: object | None = None,
+                 other: trimesh.Trimesh | None = None) -> None:
         self.walls = walls
         self.projector = projector
+        self.other = other  # measured surfaces on no mapped wall, room frame: drawn black (they hide the walls)
         self._renderer = MeshRenderer(ctx=ctx, max_error_px=PROJECTED_ERROR_PX)  # type: ignore[arg-type]
         self._key: tuple | None = None
         self._empty = True
@@ -122,6 +200,8 @@ class RoomProjector:
             T = w.T_room_from_wall @ _shift(-corrections.get(k, np.zeros(2)))
             mesh.vertices = transform_points(T, np.asarray(mesh.vertices))
             scene.add_geometry(mesh, node_name=f"wall{w.index}")
+        if self.other is not None:
+            scene.add_geometry(self.other, node_name="other_surfaces")
         self._empty = not rasters
         if rasters:
             self._renderer.set_mesh(scene)
@@ -155,7 +235,7 @@ class RoomSession:
     """A projection session over several walls of one room: registers on walls[0], checks and gates each."""
 
     def __init__(self, rig: Rig, walls: list[RoomWall], robot: RobotIO, ctx: object | None = None,
-                 tolerance_m: float = tol.REGISTRATION_TOLERANCE_M) -> None:
+                 tolerance_m: float = tol.REGISTRATION_TOLERANCE_M, other: trimesh.Trimesh | None = None) -> None:
         if not walls:
             raise ValueError("RoomSession needs at least one wall")
         self.walls = walls
@@ -163,7 +243,7 @@ class RoomSession:
         self.tolerance_m = tolerance_m
         self.session = ProjectionSession(rig, walls[0].wall_map, robot, ctx=ctx, tolerance_m=tolerance_m)
         self.projector_intr = self.session.projector_intr
-        self.room_projector = RoomProjector(walls, self.projector_intr, ctx)
+        self.room_projector = RoomProjector(walls, self.projector_intr, ctx, other)
         self.verdicts: dict[int, WallVerdict] = {}
         self.last_frame: NDArray[np.uint8] | None = None
         self.last_words: list[str] = []

@@ -2,7 +2,8 @@
 evidence behind them (coverage.npz), as `arproj map --out DIR` writes them.
 
     wall.glb      textured triangle mesh in the WALL frame (metres); its RGBA texture is the in-wall map,
-                  alpha 0 where the wall was not scanned
+                  alpha 0 where the wall was not scanned; a second, untextured primitive (if any) holds the
+                  measured surfaces that are not the wall (floor, clutter): no map, drawn dark
     objects.json  the mapped objects (mapping.mapfile): class, polyline, width, σ, depth, measured/inferred
     coverage.npz  per sensor channel, what its footprint covered and where it responded (mapping.evidence):
                   the drill check judges by it
@@ -101,6 +102,8 @@ class WallMap:
     coverage: Coverage | None = None
     source: str = ""
     room: WallRoom | None = None  # the wall in its room (floor, ceiling, corners, openings): None, not known
+    # measured surfaces that are not the wall (floor at its foot, clutter), wall frame: no map, unknown, dark
+    other: trimesh.Trimesh | None = None
 
     @property
     def extent(self) -> tuple[float, float, float, float]:
@@ -122,13 +125,13 @@ def load_wall_map(glb_path: str | Path, objects_path: str | Path | None = None) 
     except Exception as err:  # trimesh raises many exception types for bad files
         raise InputError(f"{glb_path}: not a readable GLB mesh ({type(err).__name__}: {err})",
                          "re-export it with `arproj map`") from None
-    mesh = _single_mesh(loaded, glb_path)
+    mesh, other = _wall_and_other_meshes(loaded, glb_path)
     texture, uv_from_xy = _texture_and_uv_map(mesh, glb_path)
     objects_path = Path(objects_path) if objects_path is not None else glb_path.with_name(OBJECTS_FILE)
     objects = read_objects(objects_path) if objects_path.exists() else []
     coverage = Coverage.load(glb_path.with_name(COVERAGE_FILE))
     check_objects_within(objects, coverage.wall_bounds, objects_path)
-    return WallMap(mesh, objects, texture, uv_from_xy, coverage, source=str(glb_path))
+    return WallMap(mesh, objects, texture, uv_from_xy, coverage, source=str(glb_path), other=other)
 
 
 def plane_mesh(x0: float, y0: float, x1: float, y1: float) -> trimesh.Trimesh:
@@ -137,17 +140,27 @@ def plane_mesh(x0: float, y0: float, x1: float, y1: float) -> trimesh.Trimesh:
     return trimesh.Trimesh(vertices, np.array([[0, 1, 2], [0, 2, 3]]), process=False)
 
 
-def _single_mesh(loaded: object, path: Path) -> trimesh.Trimesh:
+def _wall_and_other_meshes(loaded: object, path: Path) -> tuple[trimesh.Trimesh, trimesh.Trimesh | None]:
+    """The GLB's wall mesh and its other surfaces (None: none). The mapping exports one textured mesh (the
+    wall) and at most one untextured (the rest); other layouts are concatenated into one (textures dropped)."""
     if isinstance(loaded, trimesh.Scene):
         geometries = [g for g in loaded.dump(concatenate=False) if isinstance(g, trimesh.Trimesh) and len(g.faces)]
         if not geometries:
             raise InputError(f"{path}: the GLB holds no triangle mesh", "re-export it with `arproj map`")
-        # One textured mesh is what the mapping exports; several are concatenated (textures then dropped).
+        textured = [g for g in geometries if getattr(g.visual, "kind", None) == "texture"]
+        rest = [g for g in geometries if getattr(g.visual, "kind", None) != "texture"]
+        if len(textured) == 1 and len(rest) <= 1:
+            return _checked_mesh(textured[0], path), _checked_mesh(rest[0], path) if rest else None
         mesh = geometries[0] if len(geometries) == 1 else trimesh.util.concatenate(geometries)
+        assert isinstance(mesh, trimesh.Trimesh)  # meshes concatenate to a mesh (trimesh types it as Geometry)
     elif isinstance(loaded, trimesh.Trimesh):
         mesh = loaded
     else:
         raise InputError(f"{path}: the GLB holds a {type(loaded).__name__}, not a triangle mesh")
+    return _checked_mesh(mesh, path), None
+
+
+def _checked_mesh(mesh: trimesh.Trimesh, path: Path) -> trimesh.Trimesh:
     if len(mesh.faces) == 0 or not np.all(np.isfinite(mesh.vertices)):
         raise InputError(f"{path}: the mesh is empty or has non-finite vertices")
     if np.abs(mesh.vertices).max() > MAX_WALL_M:
@@ -156,18 +169,23 @@ def _single_mesh(loaded: object, path: Path) -> trimesh.Trimesh:
     return mesh
 
 
+def mesh_texture(mesh: trimesh.Trimesh) -> NDArray[np.uint8] | None:
+    """The RGBA image (h, w, 4) a textured mesh's UVs point into (None: no UVs or no image)."""
+    visual = mesh.visual
+    if getattr(visual, "kind", None) != "texture" or getattr(visual, "uv", None) is None:
+        return None
+    material = getattr(visual, "material", None)
+    image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
+    return None if image is None else np.asarray(image.convert("RGBA"), dtype=np.uint8)
+
+
 def _texture_and_uv_map(mesh: trimesh.Trimesh, path: Path
                         ) -> tuple[NDArray[np.uint8] | None, NDArray[np.float64] | None]:
     """The mesh's RGBA texture and the affine map wall (x, y) → uv it uses, when the UVs are affine in x, y."""
-    visual = mesh.visual
-    uv = getattr(visual, "uv", None)
-    if getattr(visual, "kind", None) != "texture" or uv is None:
+    rgba = mesh_texture(mesh)
+    if rgba is None:
         return None, None
-    material = visual.material
-    image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
-    if image is None:
-        return None, None
-    rgba = np.asarray(image.convert("RGBA"), dtype=np.uint8)
+    uv = np.asarray(getattr(mesh.visual, "uv", None), dtype=np.float64)
     xy1 = np.column_stack([mesh.vertices[:, :2], np.ones(len(mesh.vertices))])
     A, *_ = np.linalg.lstsq(xy1, np.asarray(uv, dtype=np.float64), rcond=None)
     residual = np.abs(xy1 @ A - uv).max() if len(uv) else np.inf

@@ -115,3 +115,50 @@ def test_range_images_file_to_wall_frame_mesh(views, tmp_path):
     np.savez(tmp_path / "bad.npz", depth_0=depths[0])
     with pytest.raises(InputError, match="K_0"):
         load_range_images(str(tmp_path / "bad.npz"))
+
+
+def test_the_floor_at_the_wall_foot_is_not_the_wall():
+    """Simulated site (seed 0): the x-y crop keeps the floor strip in front of the wall; classify_faces gives none
+    of its faces to the wall, and every face it gives the wall lies on the true wall plane (z = 0)."""
+    from mapping.surface import OTHER_SURFACE, classify_faces, split_wall_faces
+    from tests.support.wall_foot_range import truth_floor_faces, wall_foot_mesh
+
+    mesh, T_room_from_wall = wall_foot_mesh()
+    floor = truth_floor_faces(mesh, T_room_from_wall)
+    assert floor.sum() > 100  # the floor is in the mesh
+    labels = classify_faces(mesh, [np.eye(4)])
+    assert set(np.unique(labels)) == {0, OTHER_SURFACE}
+    assert not (labels[floor] == 0).any()
+    on_wall = mesh.vertices[mesh.faces[labels == 0]]
+    assert np.abs(on_wall[..., 2]).max() < 0.02  # range noise (mm), far inside the 5 cm gate
+    assert (labels == 0).sum() > 0.6 * len(labels)
+    # and the wall keeps its own faces: one face's normal is range noise (some tilt past 45°), so the facing is
+    # judged over its neighbourhood; no face left dark rises above the floor's 5 cm
+    from geometry.poses import transform_points
+
+    room_z = transform_points(T_room_from_wall, mesh.vertices)[:, 2][mesh.faces]
+    assert not (room_z[labels == OTHER_SURFACE].min(axis=1) > 0.05).any()
+    wall, other = split_wall_faces(mesh)
+    assert other is not None and len(wall.faces) + len(other.faces) == len(mesh.faces)
+    assert len(wall.faces) == (labels == 0).sum()
+
+
+def test_faces_of_a_room_corner_go_to_their_own_wall(views):
+    """Two walls meeting in a corner and a cube before one: each wall's faces carry its index, the cube's none."""
+    from geometry.poses import make_pose
+    from mapping.surface import OTHER_SURFACE, classify_faces
+
+    intr, poses, depths = views
+    mesh = merge_meshes([triangulate_range_image(d, intr, T) for d, T in zip(depths, poses, strict=True)])
+    # wall frames (z into the room): wall A the plane y = 3, wall B the plane x = 2
+    T_a = make_pose(np.column_stack([[1, 0, 0], [0, 0, 1], [0, -1, 0]]), [-1.0, 3.0, 0.0])
+    T_b = make_pose(np.column_stack([[0, 1, 0], [0, 0, 1], [-1, 0, 0]]), [2.0, 0.0, 0.0])
+    labels = classify_faces(mesh, [T_a, T_b])
+    centroids = mesh.triangles_center
+    truth_a = np.abs(centroids[:, 1] - 3.0) < 1e-6
+    truth_b = np.abs(centroids[:, 0] - 2.0) < 1e-6
+    assert truth_a.sum() > 100 and truth_b.sum() > 100
+    assert (labels[truth_a & ~truth_b] == 0).all() and (labels[truth_b & ~truth_a] == 1).all()
+    c, h = BOX
+    on_cube = np.all(np.abs(centroids - c) < h + 1e-6, axis=1)
+    assert on_cube.sum() > 20 and (labels[on_cube] == OTHER_SURFACE).all()

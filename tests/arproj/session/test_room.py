@@ -96,3 +96,37 @@ def test_a_wall_without_a_drawn_map_stays_dark(corner) -> None:
     near_line = cv2.dilate((landing == 0).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
     assert lit[landing == 0].mean() > 0.99
     assert (landing == 1).sum() > 100_000 and not lit[(landing == 1) & ~near_line].any()  # dark, never wall 0's
+
+
+def test_room_glb_split_by_wall_through_one_atlas_lands_each_map_on_its_own_wall(corner, tmp_path) -> None:
+    """The room mesh (both walls and a floor strip, room frame) through write_room_glb / load_room_map: each
+    wall gets its own faces and its own tile, the floor is the dark other surface, and the marks across the
+    corner land on their own walls against the site's truth."""
+    import trimesh
+
+    from arproj.session.room import load_room_map
+    from mapping.exports.glb import AtlasWall, write_room_glb
+
+    site, walls = corner
+    parts, atlas_walls = [], []
+    for k, w in enumerate(walls):
+        width, height = w.size_m
+        plane = plane_mesh(0.0, 0.0, width, height).subdivide().subdivide()
+        parts.append(trimesh.Trimesh(transform_points(w.T_room_from_wall, plane.vertices), plane.faces))
+        texture = np.zeros((40, int(40 * width / height), 4), np.uint8)
+        texture[..., k], texture[..., 3] = 200, 255  # wall 0 red, wall 1 green
+        atlas_walls.append(AtlasWall(w.index, w.T_room_from_wall, texture, (0.0, 0.0, width, height), w.size_m))
+    floor = trimesh.Trimesh([[1.0, 1.0, 0.0], [6.0, 1.0, 0.0], [6.0, 5.0, 0.0], [1.0, 5.0, 0.0]],
+                            [[0, 1, 2], [0, 2, 3]])
+    mesh = trimesh.util.concatenate([*parts, floor])
+    room = load_room_map(write_room_glb(tmp_path / "room.glb", mesh, atlas_walls))
+    assert room.other is not None and len(room.other.faces) == 2
+    assert [w.index for w in room.walls] == [0, 1]
+    for k, w in enumerate(room.walls):
+        assert len(w.wall_map.mesh.faces) == len(parts[k].faces)
+        assert np.abs(np.asarray(w.wall_map.mesh.vertices)[:, 2]).max() < 1e-9  # in its own wall frame
+        tex = w.wall_map.texture
+        assert tex is not None and tex[..., k].min() == 200 and tex[..., 1 - k].max() == 0  # its own tile only
+    for k in (0, 1):
+        errors, elsewhere = _marks_land(site, room.walls, k, room.walls, marks_from=walls)
+        assert elsewhere == 0 and len(errors) >= 10 and errors.mean() < 1e-3 and errors.max() < 2.5e-3

@@ -105,3 +105,47 @@ def test_truth_map_names_what_the_channels_can_tell():
     assert ("non_metal", "line") in by_shape and ("non_metal", "outline") in by_shape
     assert ("metal", "outline") in by_shape
     assert not {"wood", "plastic_pipe"} & {o.cls for o in wm.objects}
+
+
+def test_a_range_image_map_textures_the_wall_and_leaves_the_floor_dark(tmp_path):
+    """Simulated site (seed 0), the floor strip kept by the x-y crop of `map --range-images`: wall.glb carries
+    the map on the wall's faces only, the floor comes back as the untextured other surface, and the projector's
+    frame shows nothing (black) on the floor while it draws the map on the wall."""
+    from arproj.session.projection import MapProjector
+    from geometry.intrinsics import Intrinsics
+    from geometry.poses import look_at
+    from mapping.exports.glb import write_wall_glb
+    from tests.support.hazard_wall import hazard_wall_dense_map
+    from tests.support.wall_foot_range import truth_floor_faces, wall_foot_mesh
+
+    result, _ = hazard_wall_dense_map()
+    mesh, T_room_from_wall = wall_foot_mesh()
+    floor_faces = int(truth_floor_faces(mesh, T_room_from_wall).sum())
+    write_wall_glb(result, tmp_path / "wall.glb", mesh)
+    result.coverage.save(tmp_path / "coverage.npz")
+    wm = load_wall_map(tmp_path / "wall.glb")
+    assert wm.texture is not None and wm.other is not None
+    assert np.abs(wm.mesh.vertices[:, 2]).max() < 0.05  # every textured face lies on the wall
+    assert len(wm.other.faces) >= floor_faces > 100  # the floor is there, with no map
+    assert len(wm.mesh.faces) + len(wm.other.faces) == len(mesh.faces)
+    assert wm.extent[1] >= -0.05 and wm.extent[3] <= result.bounds[3] + 0.05
+
+    intr = Intrinsics.from_fov(320, 240, 50.0)
+    x0, y0, x1, y1 = result.bounds
+    cx = (x0 + x1) / 2
+    T_wall_from_projector = look_at([cx, 0.9, 1.2], [cx, 0.15, 0.0], up=[0.0, 1.0, 0.0])
+    with MapProjector(wm, intr) as projector:
+        frame = projector.render(T_wall_from_projector)
+    # truth floor points (wall frame y = 0, 10..30 cm out from the wall) and wall points in the map
+    xs = np.linspace(x0 + 0.05, x1 - 0.05, 5)
+    floor = np.array([[x, 0.0, z] for x in xs for z in (0.10, 0.2, 0.3)])
+    wall = np.array([[x, y, 0.0] for x in xs for y in np.linspace(y0 + 0.05, y1 - 0.05, 5)])
+    from geometry.poses import invert, transform_points
+
+    def pixels(points: np.ndarray) -> np.ndarray:
+        px = np.round(intr.project(transform_points(invert(T_wall_from_projector), points))).astype(int)
+        assert ((px >= 0) & (px < [intr.width, intr.height])).all()  # in view
+        return frame[px[:, 1], px[:, 0]]
+
+    assert (pixels(floor) == 0).all()  # black: nothing is projected where nothing is known
+    assert (pixels(wall).max(axis=1) > 0).mean() > 0.5  # the map is drawn on the wall
