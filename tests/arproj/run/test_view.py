@@ -30,8 +30,18 @@ def test_the_pictures_redrawn_by_window_are_those_of_the_whole_grid(
         log(entity, *args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(view.rec, "log", counted)
-    scan_simulated(wall, ScanSettings(plan="adaptive", serial=False), watch=view)
+    samples = scan_simulated(wall, ScanSettings(plan="adaptive", serial=False), watch=view).result.samples
     view.close()
+    xy = np.column_stack([samples["x_m"], samples["y_m"]])
+    rows, cols, inside = view.info.cell_of(xy)
+    for channel in CHANNEL_NAMES:  # the sums, pass by pass over each pass's box, are those of all samples at once
+        values = np.asarray(samples[channel], dtype=np.float64)
+        ok = inside & np.isfinite(values)
+        sums, counts = np.zeros(view.info.shape), np.zeros(view.info.shape)
+        np.add.at(sums, (rows[ok], cols[ok]), values[ok])
+        np.add.at(counts, (rows[ok], cols[ok]), 1.0)
+        np.testing.assert_array_equal(view.counts[channel], counts)
+        np.testing.assert_allclose(view.sums[channel], sums, rtol=1e-12, atol=1e-12)
     res = view.info.resolution
     covered = {}
     for channel in SAFETY_CHANNELS:  # the whole grid at once, as the view drew it before it kept its pictures
