@@ -2,8 +2,11 @@
 
 Topics, once per cycle (stamps: nanoseconds since the session started, on the wall clock's epoch):
   /tf  tf2_msgs/msg/TFMessage  room -> robot (the registration's T_wall_from_robot: the map's wall frame is the
-       session's room), robot -> projector (the registered projector pose), robot -> camera_left (the rig's
-       T_robot_from_camera_left) -> camera_right: REP 105's one-parent tree. No registration: no /tf.
+       session's room), robot -> head (the head's moving plate, geometry.head, at the pan/tilt the head reported
+       when the registration was made) -> projector (the rest of the registered projector pose: room -> projector
+       along the tree is the registration's), robot -> camera_left (the rig's T_robot_from_camera_left) ->
+       camera_right: REP 105's one-parent tree. A rig without a head model: robot -> projector. No registration:
+       no /tf.
   /projector/camera_info, /camera_left/camera_info, /camera_right/camera_info  sensor_msgs/msg/CameraInfo
   /projector/image/compressed, /camera_left/image/compressed, /camera_right/image/compressed
        sensor_msgs/msg/CompressedImage (PNG): the frame shown, the cameras' last captures
@@ -87,7 +90,13 @@ class SessionRecorder:
         reg = session.registration
         if reg is not None:
             T_robot_from_projector = invert(reg.T_wall_from_robot) @ reg.T_wall_from_projector
-            tfs = [(reg.T_wall_from_robot, "room", "robot", t), (T_robot_from_projector, "robot", "projector", t)]
+            tfs = [(reg.T_wall_from_robot, "room", "robot", t)]
+            if self.rig.head is not None:
+                T_robot_from_head = self.rig.head.T_robot_from_head([*reg.head_deg, 0.0])
+                tfs += [(T_robot_from_head, "robot", "head", t),
+                        (invert(T_robot_from_head) @ T_robot_from_projector, "head", "projector", t)]
+            else:
+                tfs += [(T_robot_from_projector, "robot", "projector", t)]
             if self.T_robot_from_left is not None and self.T_right_from_left is not None:
                 tfs += [(self.T_robot_from_left, "robot", "camera_left", t),
                         (invert(self.T_right_from_left), "camera_left", "camera_right", t)]
