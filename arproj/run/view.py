@@ -278,3 +278,45 @@ class SessionView:
     def close(self) -> None:
         self.rec.flush()
         self.rec.disconnect()
+
+
+CALIBRATION_ENTITIES = ("projector/pattern", "cameras/left", "cameras/right", "cameras/left/coverage",
+                        "cameras/right/coverage")
+
+
+class CalibrationView:
+    """The live calibration in Rerun (`arproj calibrate projector --live --view`), by capture (timeline
+    `capture`): the image shown (projector/pattern), each camera's frame (cameras/left, cameras/right) and the
+    coverage, every board corner found so far in each camera's board views, drawn over its frames
+    (cameras/left/coverage, cameras/right/coverage): where the image is still bare, the calibration has not
+    looked."""
+
+    def __init__(self, view: str) -> None:
+        check_target(view)
+        self.rec = rr.RecordingStream("arproj_calibrate")
+        if view == LIVE:
+            self.rec.spawn()
+        else:
+            self.rec.save(view)
+        self.captures = 0
+        self.corners: dict[str, list[NDArray[np.float64]]] = {"left": [], "right": []}
+
+    def captured(self, image: NDArray[np.uint8], frames: tuple[NDArray[np.uint8], ...]) -> None:
+        self.rec.set_time("capture", sequence=self.captures)
+        self.captures += 1
+        self.rec.log("projector/pattern", rr.Image(image))
+        for side, frame in zip(("left", "right"), frames, strict=False):
+            self.rec.log(f"cameras/{side}", rr.Image(frame))
+
+    def boards(self, left: list[Any], right: list[Any]) -> None:
+        """Board views found (calibration.boards.BoardView, None where the board was not found)."""
+        for side, views in (("left", left), ("right", right)):
+            found = [v.image_points for v in views if v is not None]
+            if found:
+                self.corners[side] += found
+                self.rec.log(f"cameras/{side}/coverage", rr.Points2D(np.concatenate(self.corners[side]),
+                                                                      colors=[(0, 200, 60)], radii=2.0))
+
+    def close(self) -> None:
+        self.rec.flush()
+        self.rec.disconnect()

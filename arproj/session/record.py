@@ -16,6 +16,7 @@ Topics, once per cycle (stamps: nanoseconds since the session started, on the wa
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 import cv2
@@ -55,21 +56,26 @@ def png_image(image: NDArray[np.uint8], frame_id: str, t_ns: int) -> dict[str, A
 
 
 class Captures:
-    """The robot's cameras' last captures (the pattern and the check marks the session photographs): `watch`
-    wraps the robot's capture."""
+    """The cameras' last captures and the image shown for them, and whoever wants every capture as it comes
+    (`listeners`, called with the image shown and the frames): `watch` wraps the capture(image) -> frames of a
+    device, the session's robot (two cameras) or the calibration's station (one or two)."""
 
     def __init__(self) -> None:
-        self.last: tuple[NDArray[np.uint8], NDArray[np.uint8]] | None = None
+        self.last: tuple[NDArray[np.uint8], ...] | None = None
+        self.shown: NDArray[np.uint8] | None = None
+        self.listeners: list[Callable[[NDArray[np.uint8], tuple[NDArray[np.uint8], ...]], None]] = []
 
-    def watch(self, robot: Any) -> None:
-        capture = robot.capture
+    def watch(self, device: Any) -> None:
+        capture = device.capture
 
-        def recorded(frame: NDArray[np.uint8]) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
-            left, right = capture(frame)
-            self.last = (left, right)
-            return left, right
+        def recorded(image: NDArray[np.uint8]) -> Any:
+            frames = capture(image)
+            self.last, self.shown = tuple(frames), image
+            for listen in self.listeners:
+                listen(image, self.last)
+            return frames
 
-        robot.capture = recorded
+        device.capture = recorded
 
 
 class SessionRecorder:
