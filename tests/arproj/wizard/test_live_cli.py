@@ -16,6 +16,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from arproj.run.view import CALIBRATION_ENTITIES
+from calibration.projector import gray_code_patterns
 from geometry.rig import Rig
 
 
@@ -74,7 +75,9 @@ def _check_recordings(tmp_path: Path, captures: int, rig: Rig) -> None:
         np.testing.assert_array_equal(info.k.reshape(3, 3), intr.K)
     shown = {cv2.imdecode(np.frombuffer(m.data, np.uint8), cv2.IMREAD_UNCHANGED).tobytes()
              for m in out["/projector/image/compressed"]}
-    assert len(shown) > 36  # the Gray code's patterns and more, not one image over and over
+    intr = rig.intrinsics["projector"]
+    # what the beamer showed: the Gray code (its last pattern black, as for the board views), each pattern as sent
+    assert shown == {p.tobytes() for p in gray_code_patterns(intr.width, intr.height)}
     from rerun.chunk import RrdReader
 
     paths = set(RrdReader(tmp_path / "c.rrd").store().schema().entity_paths())
