@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import InputError
 from geometry.inputs import float_array
-from geometry.poses import make_pose, rotation_matrices
+from geometry.poses import invert, make_pose, rotation_matrices
 
 JOINT_NAMES = ("pan", "tilt", "roll")
 
@@ -49,6 +49,13 @@ class HeadModel:
         for R, p in zip(rotation_matrices(self.axes * a[:, None]), self.points, strict=True):  # about each line
             T = T @ make_pose(R, p - R @ p)
         return T @ self.T_robot_from_projector_zero
+
+    def T_robot_from_head(self, angles_deg: ArrayLike) -> NDArray[np.float64]:
+        """The head's moving plate for the (pan, tilt, roll) joint angles in degrees: at the tilt axis's point,
+        turned with the joints (the frame between robot and projector in a REP 105 tree: the projector holds
+        still on it, T_head_from_projector = T_robot_from_head⁻¹ · T_robot_from_projector whatever the angles)."""
+        turned = self.T_robot_from_projector(angles_deg) @ invert(self.T_robot_from_projector_zero)
+        return turned @ make_pose(None, self.points[1])
 
     def to_dict(self) -> dict:
         return {

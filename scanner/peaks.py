@@ -45,6 +45,10 @@ def detect_peaks(coord: np.ndarray, values: np.ndarray, config: PeakConfig | Non
     values = np.asarray(values, dtype=np.float64)
     if coord.size < 5 or np.ptp(coord) < 4 * cfg.grid_step_m:
         return []
+    # resampling and smoothing stay within the readings' range and the baseline is one of them: a pass that
+    # spans less than min_height has no peak (a quick answer for the many flat passes)
+    if np.ptp(values) < cfg.min_height:
+        return []
     order = np.argsort(coord, kind="stable")
     c, v = coord[order], values[order]
     c, first = np.unique(c, return_index=True)

@@ -389,12 +389,21 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         settle: float = typer.Option(0.15, "--settle", help="Live: seconds to wait after showing a pattern."),
         settle_timeout: float = typer.Option(10.0, "--settle-timeout", help="Live: give up when no two frames "
                                              "agree within this many seconds."),
+        record: Path | None = typer.Option(None, "--record", help="Live: also write every capture (the pattern "
+                                           "shown, each camera's frame) and the rig's intrinsics at the end as "
+                                           "ROS 2 messages into this .mcap (a rosbag2 folder's metadata.yaml "
+                                           "beside it)."),
+        view: str | None = typer.Option(None, "--view", help="Live: show the captures and the board corners "
+                                        "found so far (the coverage) in a Rerun viewer: `--view live` spawns the "
+                                        "viewer, `--view FILE.rrd` saves the recording instead."),
         as_json: bool = typer.Option(False, "--json", help="Print the quality figures as JSON."),
     ) -> None:
         """Projector calibration: from capture folders (one camera and a printed board, Moreno & Taubin), or
         --live: the Gray code shown on the beamer and captured; with two cameras also the head and (--laser)
         the cameras' mount. Every recovered quantity is given with its 95 % bound."""
         if not live:
+            if record is not None or view is not None:
+                raise InputError("--record and --view watch a live calibration", "add --live, or leave them out")
             if not captures or not size or out is None:
                 raise InputError("--captures, --projector and --out are needed (or --live)",
                                  "see `arproj calibrate projector --help`")
@@ -402,12 +411,16 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             return
         if rig is None:
             raise InputError("--live needs --rig DIR (the rig folder to read and write)")
+        from arproj.run.watch import check_targets
         from arproj.wizard.live_run import LiveOptions
+
+        check_targets(record, view)  # a bad --record or --view refused before any work
 
         opts = LiveOptions(screen=screen, left=left, projector_size=(0, 0), rig=rig, right=right or None,
                            head=head or None, laser=laser or None, mover=mover or None, board=board or DEFAULT_BOARD,
                            poses=poses, head_poses=head_poses or None, mount_poses=mount_poses,
-                           stereo_poses=stereo, settle_s=settle, settle_timeout_s=settle_timeout)
+                           stereo_poses=stereo, settle_s=settle, settle_timeout_s=settle_timeout, record=record,
+                           view=view)
         live_projector_command(opts, size, sim, small, seed, as_json)
 
     app.add_typer(calibrate_app, name="calibrate")

@@ -68,11 +68,20 @@ class ScanView:
         self.top = self.info.origin_y + self.info.height * self.info.resolution
         self.sums = {c: np.zeros(self.info.shape) for c in CHANNEL_NAMES}
         self.counts = {c: np.zeros(self.info.shape) for c in CHANNEL_NAMES}
+        # the pictures sent, kept between sends and redrawn only where samples fell since (the window `_dirty`,
+        # rows and columns [r0, r1) × [c0, c1)): a large wall's grids cost what a pass touches, not the wall
+        self.covered = {c: np.zeros(self.info.shape, bool) for c in SAFETY_CHANNELS}
+        self.cover = np.zeros((*self.info.shape, 4), np.uint8)
+        self.maps = {c: np.zeros((*self.info.shape, 4), np.uint8) for c in CHANNEL_NAMES}
+        self._dirty: tuple[int, int, int, int] | None = None
+        self._disks = {c: _disk(DEFAULT_COVERAGE_RADIUS_M[c] / self.info.resolution) for c in SAFETY_CHANNELS}
+        self._images_sent = False
         self.passes = 0
         self._pending: list[tuple[NDArray[np.float64], NDArray[np.uint8]]] = []
         self._batches = 0
         self._ends: list[NDArray[np.float64]] = []
         self.found: dict[str, list[NDArray[np.float64]]] = {c: [] for c in CHANNEL_NAMES}
+        self._new_found = False
         self._sent = time.monotonic()
         corners = np.array([[0, 0], [wall_width_m, 0], [wall_width_m, wall_height_m], [0, wall_height_m], [0, 0]])
         self.rec.log("wall/outline", rr.LineStrips2D([self._screen(corners)]), static=True)
@@ -110,11 +119,21 @@ class ScanView:
         colours = np.column_stack([255 * level, 80 + 100 * (1 - level), 255 * (1 - level)]).astype(np.uint8)
         self._pending.append((self._screen(xy), colours))
         rows, cols, inside = self.info.cell_of(xy)
-        for channel in CHANNEL_NAMES:
-            values = np.asarray(samples.get(channel, np.full(len(xy), np.nan)), dtype=np.float64)
-            ok = inside & np.isfinite(values)
-            np.add.at(self.sums[channel], (rows[ok], cols[ok]), values[ok])
-            np.add.at(self.counts[channel], (rows[ok], cols[ok]), 1.0)
+        if inside.any():
+            r, c = rows[inside], cols[inside]
+            r0, r1, c0, c1 = box = (int(r.min()), int(r.max()) + 1, int(c.min()), int(c.max()) + 1)
+            d = self._dirty or box
+            self._dirty = (min(d[0], r0), max(d[1], r1), min(d[2], c0), max(d[3], c1))
+            # summed by bincount over the pass's box (a pass runs along a row or a column: a thin box), which
+            # costs a tenth of np.add.at over the whole grid
+            width, cells = c1 - c0, (r1 - r0) * (c1 - c0)
+            for channel in CHANNEL_NAMES:
+                values = np.asarray(samples.get(channel, np.full(len(xy), np.nan)), dtype=np.float64)
+                ok = inside & np.isfinite(values)
+                flat = (rows[ok] - r0) * width + (cols[ok] - c0)
+                window = np.s_[r0:r1, c0:c1]
+                self.sums[channel][window] += np.bincount(flat, values[ok], cells).reshape(r1 - r0, width)
+                self.counts[channel][window] += np.bincount(flat, minlength=cells).reshape(r1 - r0, width)
         self._detections(row, samples, xy)
         self._ends.append(self._screen(xy[-1]))
         if time.monotonic() - self._sent >= IMAGE_PERIOD_S:
@@ -137,19 +156,47 @@ class ScanView:
             found = np.column_stack([np.interp(at, coord[order], xy[order, 0]),
                                      np.interp(at, coord[order], xy[order, 1])])
             self.found[channel].append(self._screen(found))
+            self._new_found = True
 
-    def _covered(self, channel: str) -> NDArray[np.bool_]:
-        """The cells within the channel's coverage radius of a cell a sample fell in (the view's picture of
-        coverage, a cell coarser than the map's, mapping.evidence.Coverage, which the drill check reads)."""
-        radius = DEFAULT_COVERAGE_RADIUS_M[channel] / self.info.resolution
-        r = int(np.ceil(radius))
-        dy, dx = np.mgrid[-r:r + 1, -r:r + 1]
-        return ndimage.binary_dilation(self.counts[channel] > 0, structure=np.hypot(dx, dy) <= radius + 0.5)
+    def _redraw(self) -> None:
+        """Bring the pictures up to date inside the window samples fell in since the last send: each channel's
+        mean reading (grey, unseen cells transparent) and the safety channels' coverage, the cells within the
+        channel's coverage radius of a cell a sample fell in (the view's picture of coverage, a cell coarser than
+        the map's, mapping.evidence.Coverage, which the drill check reads). Coverage only grows: the dilation
+        is redone on the window widened by the radius (the cells it reaches), from the seen cells within twice
+        the radius (all that reach them), which gives what dilating the whole grid gives."""
+        if self._dirty is None:
+            return
+        r0, r1, c0, c1 = self._dirty
+        self._dirty = None
+        window = np.s_[r0:r1, c0:c1]
+        for channel in CHANNEL_NAMES:
+            counts = self.counts[channel][window]
+            seen = counts > 0
+            mean = np.divide(self.sums[channel][window], counts, out=np.zeros(counts.shape), where=seen)
+            image = self.maps[channel][window]
+            image[..., :3] = np.clip(255 * mean, 0, 255)[..., None]
+            image[..., 3] = 255 * seen
+        height, width = self.info.shape
+        reach = max(len(disk) // 2 for disk in self._disks.values())
+        out = np.s_[max(r0 - reach, 0):min(r1 + reach, height), max(c0 - reach, 0):min(c1 + reach, width)]
+        a0, b0 = max(r0 - 2 * reach, 0), max(c0 - 2 * reach, 0)
+        source = np.s_[a0:min(r1 + 2 * reach, height), b0:min(c1 + 2 * reach, width)]
+        crop = np.s_[out[0].start - a0:out[0].stop - a0, out[1].start - b0:out[1].stop - b0]
+        for channel, disk in self._disks.items():
+            grown = ndimage.binary_dilation(self.counts[channel][source] > 0, structure=disk)
+            self.covered[channel][out] |= grown[crop]
+        covered = [self.covered[c][out] for c in SAFETY_CHANNELS]
+        cover = self.cover[out]
+        cover[...] = 0
+        cover[np.any(covered, axis=0)] = (240, 170, 0, 120)  # one safety channel looked: amber
+        cover[np.all(covered, axis=0)] = (0, 170, 60, 120)  # both: green
 
     def images(self) -> None:
         """Send what came since the last time: the samples (one entity per batch, so that every sample stays in
         view), every detection so far, the grids as they stand (flipped: an image's first row is the wall's
-        top). Batched, because each call to Rerun costs about a millisecond whatever it carries."""
+        top), those only if samples fell since. Batched, because each call to Rerun costs about a millisecond
+        whatever it carries."""
         self._sent = time.monotonic()
         if self._pending:
             xy, colours = (np.concatenate(parts) for parts in zip(*self._pending, strict=True))
@@ -161,28 +208,31 @@ class ScanView:
             self.rec.log("wall/scanner", rr.Points2D(ends, radii=[0.004] * (len(ends) - 1) + [0.01],
                                                      colors=[(0, 0, 0)]))
             self._ends = []
-        for channel, found in self.found.items():
-            if found:
-                self.rec.log(f"wall/detections/{channel}", rr.Points2D(np.concatenate(found), radii=0.006,
-                                                                      colors=[_DETECTION_COLOUR[channel]]))
-        covered = [self._covered(c) for c in SAFETY_CHANNELS]
-        both, some = np.all(covered, axis=0), np.any(covered, axis=0)
-        cover = np.zeros((*self.info.shape, 4), np.uint8)
-        cover[some] = (240, 170, 0, 120)
-        cover[both] = (0, 170, 60, 120)
-        self.rec.log("wall/coverage", rr.Image(cover[::-1]))
+        if self._new_found:
+            for channel, found in self.found.items():
+                if found:
+                    self.rec.log(f"wall/detections/{channel}", rr.Points2D(np.concatenate(found), radii=0.006,
+                                                                          colors=[_DETECTION_COLOUR[channel]]))
+            self._new_found = False
+        if self._dirty is None and self._images_sent:
+            return
+        self._redraw()
+        self._images_sent = True
+        self.rec.log("wall/coverage", rr.Image(self.cover[::-1]))
         for channel in CHANNEL_NAMES:
-            seen = self.counts[channel] > 0
-            mean = np.divide(self.sums[channel], self.counts[channel], out=np.zeros(self.info.shape), where=seen)
-            image = np.zeros((*self.info.shape, 4), np.uint8)  # grey, unseen cells transparent
-            image[..., :3] = np.clip(255 * mean, 0, 255)[..., None]
-            image[..., 3] = 255 * seen
-            self.rec.log(f"wall/map/{channel}", rr.Image(image[::-1]))
+            self.rec.log(f"wall/map/{channel}", rr.Image(self.maps[channel][::-1]))
 
     def close(self) -> None:
         self.images()
         self.rec.flush()
         self.rec.disconnect()
+
+
+def _disk(radius: float) -> NDArray[np.bool_]:
+    """The cells within `radius` cells of the centre one (a cell counts if its centre lies within radius + ½)."""
+    r = int(np.ceil(radius))
+    dy, dx = np.mgrid[-r:r + 1, -r:r + 1]
+    return np.hypot(dx, dy) <= radius + 0.5
 
 
 SESSION_ENTITIES = ("projector/frame", "projector/check_marks", "cameras/left", "cameras/right", "gate")
@@ -224,6 +274,48 @@ class SessionView:
             self.rec.log("cameras/left", rr.Image(left))
             self.rec.log("cameras/right", rr.Image(right))
         self.rec.log("gate", rr.TextLog(gate_state(decision), level="INFO" if decision.show_map else "WARN"))
+
+    def close(self) -> None:
+        self.rec.flush()
+        self.rec.disconnect()
+
+
+CALIBRATION_ENTITIES = ("projector/pattern", "cameras/left", "cameras/right", "cameras/left/coverage",
+                        "cameras/right/coverage")
+
+
+class CalibrationView:
+    """The live calibration in Rerun (`arproj calibrate projector --live --view`), by capture (timeline
+    `capture`): the image shown (projector/pattern), each camera's frame (cameras/left, cameras/right) and the
+    coverage, every board corner found so far in each camera's board views, drawn over its frames
+    (cameras/left/coverage, cameras/right/coverage): where the image is still bare, the calibration has not
+    looked."""
+
+    def __init__(self, view: str) -> None:
+        check_target(view)
+        self.rec = rr.RecordingStream("arproj_calibrate")
+        if view == LIVE:
+            self.rec.spawn()
+        else:
+            self.rec.save(view)
+        self.captures = 0
+        self.corners: dict[str, list[NDArray[np.float64]]] = {"left": [], "right": []}
+
+    def captured(self, image: NDArray[np.uint8], frames: tuple[NDArray[np.uint8], ...]) -> None:
+        self.rec.set_time("capture", sequence=self.captures)
+        self.captures += 1
+        self.rec.log("projector/pattern", rr.Image(image))
+        for side, frame in zip(("left", "right"), frames, strict=False):
+            self.rec.log(f"cameras/{side}", rr.Image(frame))
+
+    def boards(self, left: list[Any], right: list[Any]) -> None:
+        """Board views found (calibration.boards.BoardView, None where the board was not found)."""
+        for side, views in (("left", left), ("right", right)):
+            found = [v.image_points for v in views if v is not None]
+            if found:
+                self.corners[side] += found
+                self.rec.log(f"cameras/{side}/coverage", rr.Points2D(np.concatenate(self.corners[side]),
+                                                                      colors=[(0, 200, 60)], radii=2.0))
 
     def close(self) -> None:
         self.rec.flush()

@@ -2,8 +2,11 @@
 
 Topics, once per cycle (stamps: nanoseconds since the session started, on the wall clock's epoch):
   /tf  tf2_msgs/msg/TFMessage  room -> robot (the registration's T_wall_from_robot: the map's wall frame is the
-       session's room), robot -> projector (the registered projector pose), robot -> camera_left (the rig's
-       T_robot_from_camera_left) -> camera_right: REP 105's one-parent tree. No registration: no /tf.
+       session's room), robot -> head (the head's moving plate, geometry.head, at the pan/tilt the head reported
+       when the registration was made) -> projector (the rest of the registered projector pose: room -> projector
+       along the tree is the registration's), robot -> camera_left (the rig's T_robot_from_camera_left) ->
+       camera_right: REP 105's one-parent tree. A rig without a head model: robot -> projector. No registration:
+       no /tf.
   /projector/camera_info, /camera_left/camera_info, /camera_right/camera_info  sensor_msgs/msg/CameraInfo
   /projector/image/compressed, /camera_left/image/compressed, /camera_right/image/compressed
        sensor_msgs/msg/CompressedImage (PNG): the frame shown, the cameras' last captures
@@ -13,6 +16,7 @@ Topics, once per cycle (stamps: nanoseconds since the session started, on the wa
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 import cv2
@@ -52,21 +56,26 @@ def png_image(image: NDArray[np.uint8], frame_id: str, t_ns: int) -> dict[str, A
 
 
 class Captures:
-    """The robot's cameras' last captures (the pattern and the check marks the session photographs): `watch`
-    wraps the robot's capture."""
+    """The cameras' last captures and the image shown for them, and whoever wants every capture as it comes
+    (`listeners`, called with the image shown and the frames): `watch` wraps the capture(image) -> frames of a
+    device, the session's robot (two cameras) or the calibration's station (one or two)."""
 
     def __init__(self) -> None:
-        self.last: tuple[NDArray[np.uint8], NDArray[np.uint8]] | None = None
+        self.last: tuple[NDArray[np.uint8], ...] | None = None
+        self.shown: NDArray[np.uint8] | None = None
+        self.listeners: list[Callable[[NDArray[np.uint8], tuple[NDArray[np.uint8], ...]], None]] = []
 
-    def watch(self, robot: Any) -> None:
-        capture = robot.capture
+    def watch(self, device: Any) -> None:
+        capture = device.capture
 
-        def recorded(frame: NDArray[np.uint8]) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
-            left, right = capture(frame)
-            self.last = (left, right)
-            return left, right
+        def recorded(image: NDArray[np.uint8]) -> Any:
+            frames = capture(image)
+            self.last, self.shown = tuple(frames), image
+            for listen in self.listeners:
+                listen(image, self.last)
+            return frames
 
-        robot.capture = recorded
+        device.capture = recorded
 
 
 class SessionRecorder:
@@ -87,7 +96,13 @@ class SessionRecorder:
         reg = session.registration
         if reg is not None:
             T_robot_from_projector = invert(reg.T_wall_from_robot) @ reg.T_wall_from_projector
-            tfs = [(reg.T_wall_from_robot, "room", "robot", t), (T_robot_from_projector, "robot", "projector", t)]
+            tfs = [(reg.T_wall_from_robot, "room", "robot", t)]
+            if self.rig.head is not None:
+                T_robot_from_head = self.rig.head.T_robot_from_head([*reg.head_deg, 0.0])
+                tfs += [(T_robot_from_head, "robot", "head", t),
+                        (invert(T_robot_from_head) @ T_robot_from_projector, "head", "projector", t)]
+            else:
+                tfs += [(T_robot_from_projector, "robot", "projector", t)]
             if self.T_robot_from_left is not None and self.T_right_from_left is not None:
                 tfs += [(self.T_robot_from_left, "robot", "camera_left", t),
                         (invert(self.T_right_from_left), "camera_left", "camera_right", t)]

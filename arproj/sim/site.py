@@ -338,8 +338,7 @@ class Site:
     @property
     def T_robot_from_head(self) -> NDArray[np.float64]:
         """The moving plate of the head: at the tilt axis point, turned with the joints."""
-        E = self.T_robot_from_projector @ invert(self.head.T_robot_from_projector_zero)
-        return E @ make_pose(None, self.head.points[1])
+        return self.head.T_robot_from_head(self._drive.true_deg)
 
     def T_room_from(self, frame: str) -> NDArray[np.float64]:
         """True pose of a frame: room, robot, head, projector, camera_left, camera_right, laser, wall<i>."""

@@ -13,6 +13,8 @@ Order (each result is written to the rig folder before the next starts):
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -54,6 +56,8 @@ class LiveOptions:
     stereo_poses: int = 0
     settle_s: float = SETTLE_S
     settle_timeout_s: float = SETTLE_TIMEOUT_S
+    record: Path | None = None  # --record FILE.mcap: every capture as ROS 2 messages (arproj.wizard.live_record)
+    view: str | None = None  # --view live | FILE.rrd: captures and coverage in Rerun (arproj.run.view)
 
 
 def run_live(opts: LiveOptions, track: Track, design_mount: np.ndarray | None = None,
@@ -66,53 +70,98 @@ def run_live(opts: LiveOptions, track: Track, design_mount: np.ndarray | None = 
     if design_mount is not None and MOUNT_POSE not in rig.poses:
         rig.poses[MOUNT_POSE] = np.asarray(design_mount, dtype=np.float64)
     summary: dict[str, Any] = {"rig": str(rig_dir)}
-    with LiveStation.open(opts.screen, opts.projector_size, opts.left, opts.right, opts.head, mover, opts.laser,
-                          opts.settle_s, opts.settle_timeout_s) as station:
-        if opts.stereo_poses:
-            if opts.right is None:
-                raise InputError("--stereo calibrates the stereo pair", "give --right CAM too")
-            result, stereo_rig = step_stereo(station, rig_dir, opts.board, opts.stereo_poses)
-            rig.intrinsics.update(stereo_rig.intrinsics)
-            rig.poses.update(stereo_rig.poses)
-            rig.quality["stereo"] = stereo_rig.quality["stereo"]
-            rig.save(rig_dir)
-            summary["stereo"] = result["quality"]
-            station.clear_board()  # the projector step needs the wall alone in the beam
+    with ExitStack() as stack:
+        station = stack.enter_context(LiveStation.open(opts.screen, opts.projector_size, opts.left, opts.right,
+                                                       opts.head, mover, opts.laser, opts.settle_s,
+                                                       opts.settle_timeout_s))
+        _watch(station, opts, rig_dir, stack, summary)
+        _calibrate(station, opts, board, rig, rig_dir, track, summary, truth)
+    return summary
+
+
+def _watch(station: LiveStation, opts: LiveOptions, rig_dir: Path, stack: ExitStack, summary: dict[str, Any]) -> None:
+    """--record and --view: told of every capture through the tap the projection session uses, and (the view)
+    of every set of board views; the bag gets the rig's intrinsics when the calibration ends, also after an error
+    (what it had reached), and is closed then (its metadata.yaml written)."""
+    if opts.record is None and opts.view is None:
+        return
+    from arproj.session.record import Captures
+
+    captures = Captures()
+    board_listeners: list[Callable[[list[Any], list[Any]], None]] = []
+    if opts.record is not None:
+        from arproj.wizard.live_record import CalibrationRecorder
+        from mapping.ros.bag import RosBag
+
+        recorder = CalibrationRecorder(stack.enter_context(RosBag(opts.record)))
+        stack.callback(lambda: recorder.finish(Rig.load(rig_dir) if (rig_dir / RIG_FILE).exists() else Rig()))
+        captures.listeners.append(recorder.captured)
+        summary["record"] = str(opts.record)
+    if opts.view is not None:
+        from arproj.run.view import CalibrationView
+
+        view = CalibrationView(opts.view)
+        stack.callback(view.close)
+        captures.listeners.append(view.captured)
+        board_listeners.append(view.boards)
+    captures.watch(station)
+    board_views = station.board_views
+
+    def tapped(*args: Any, **kwargs: Any) -> tuple[list[Any], list[Any]]:
+        left, right = board_views(*args, **kwargs)
+        for listen in board_listeners:
+            listen(left, right)
+        return left, right
+
+    station.board_views = tapped  # type: ignore[method-assign]
+
+
+def _calibrate(station: LiveStation, opts: LiveOptions, board: Any, rig: Rig, rig_dir: Path, track: Track,
+               summary: dict[str, Any], truth: dict | None) -> None:
+    if opts.stereo_poses:
         if opts.right is None:
-            camera = rig.intrinsics.get("camera_left")
-            calib = step_projector_board(station, board, opts.poses, camera, track)
-            rig.intrinsics["projector"] = calib.projector
-            if camera is None and calib.camera is not None:
-                rig.intrinsics["camera_left"] = calib.camera
-            rig.quality["projector"] = {"rms_px": round(calib.projector_rms_px, 4),
-                                        "poses": len(calib.T_projector_from_view),
-                                        "projector_95": calib.quality()["projector_95"],
-                                        "method": "live Gray code, one camera and a printed board"}
-            rig.save(rig_dir)
-            summary["projector"] = calib.quality()
-            summary["captures"] = station.captures
-            if truth is not None:
-                summary["truth"] = truth_check(truth, projector=calib)
-            return summary
-        if "camera_left" not in rig.intrinsics or "camera_right" not in rig.intrinsics:
-            raise InputError(f"{rig_dir / RIG_FILE}: no calibrated stereo pair (camera_left, camera_right)",
-                             "run `arproj calibrate stereo … --out RIG` first, or add --stereo N")
-        fit_angles, check_angles = pan_tilt_plan(station.aim_deg, opts.head_poses)
-        result, rig, calib, samples = step_projector_stereo(station, rig, rig_dir, fit_angles, track)
-        summary["projector"] = result["quality"]
-        mount = None
-        if opts.laser is not None:
-            if MOUNT_POSE not in rig.poses:
-                raise InputError(f"{rig_dir / RIG_FILE}: no {MOUNT_POSE} to start the mount from",
-                                 f"add the design value of the cameras' mount as poses: {MOUNT_POSE} (4x4)")
-            mount_result, mount = step_mount(station, rig, rig_dir, board, opts.mount_poses, rig.poses[MOUNT_POSE])
-            summary["mount"] = mount_result["quality"]
-        if MOUNT_POSE not in rig.poses:
-            raise InputError(f"{rig_dir / RIG_FILE}: no {MOUNT_POSE} to put the head model in the robot frame",
-                             "give --laser URL to calibrate it, or add its design value to rig.yaml's poses")
-        head = step_head_live(rig, rig_dir, result["measurements"], rig.poses[MOUNT_POSE], check_angles, samples)
-        summary["head"] = head["quality"]
+            raise InputError("--stereo calibrates the stereo pair", "give --right CAM too")
+        result, stereo_rig = step_stereo(station, rig_dir, opts.board, opts.stereo_poses)
+        rig.intrinsics.update(stereo_rig.intrinsics)
+        rig.poses.update(stereo_rig.poses)
+        rig.quality["stereo"] = stereo_rig.quality["stereo"]
+        rig.save(rig_dir)
+        summary["stereo"] = result["quality"]
+        station.clear_board()  # the projector step needs the wall alone in the beam
+    if opts.right is None:
+        camera = rig.intrinsics.get("camera_left")
+        calib = step_projector_board(station, board, opts.poses, camera, track)
+        rig.intrinsics["projector"] = calib.projector
+        if camera is None and calib.camera is not None:
+            rig.intrinsics["camera_left"] = calib.camera
+        rig.quality["projector"] = {"rms_px": round(calib.projector_rms_px, 4),
+                                    "poses": len(calib.T_projector_from_view),
+                                    "projector_95": calib.quality()["projector_95"],
+                                    "method": "live Gray code, one camera and a printed board"}
+        rig.save(rig_dir)
+        summary["projector"] = calib.quality()
         summary["captures"] = station.captures
         if truth is not None:
-            summary["truth"] = truth_check(truth, projector=calib, rig=Rig.load(rig_dir), head=head, mount=mount)
-    return summary
+            summary["truth"] = truth_check(truth, projector=calib)
+        return
+    if "camera_left" not in rig.intrinsics or "camera_right" not in rig.intrinsics:
+        raise InputError(f"{rig_dir / RIG_FILE}: no calibrated stereo pair (camera_left, camera_right)",
+                         "run `arproj calibrate stereo … --out RIG` first, or add --stereo N")
+    fit_angles, check_angles = pan_tilt_plan(station.aim_deg, opts.head_poses)
+    result, rig, calib, samples = step_projector_stereo(station, rig, rig_dir, fit_angles, track)
+    summary["projector"] = result["quality"]
+    mount = None
+    if opts.laser is not None:
+        if MOUNT_POSE not in rig.poses:
+            raise InputError(f"{rig_dir / RIG_FILE}: no {MOUNT_POSE} to start the mount from",
+                             f"add the design value of the cameras' mount as poses: {MOUNT_POSE} (4x4)")
+        mount_result, mount = step_mount(station, rig, rig_dir, board, opts.mount_poses, rig.poses[MOUNT_POSE])
+        summary["mount"] = mount_result["quality"]
+    if MOUNT_POSE not in rig.poses:
+        raise InputError(f"{rig_dir / RIG_FILE}: no {MOUNT_POSE} to put the head model in the robot frame",
+                         "give --laser URL to calibrate it, or add its design value to rig.yaml's poses")
+    head = step_head_live(rig, rig_dir, result["measurements"], rig.poses[MOUNT_POSE], check_angles, samples)
+    summary["head"] = head["quality"]
+    summary["captures"] = station.captures
+    if truth is not None:
+        summary["truth"] = truth_check(truth, projector=calib, rig=Rig.load(rig_dir), head=head, mount=mount)

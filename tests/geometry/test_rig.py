@@ -44,6 +44,22 @@ def test_head_model_turns_about_its_axes() -> None:
     np.testing.assert_allclose(T[:3, :3] @ [1, 0, 0], [0, 1, 0], atol=1e-12)  # cos 90° in float64 is 6e-17
 
 
+def test_the_head_frame_sits_on_the_tilt_axis_and_carries_the_projector_still() -> None:
+    head = _head()
+    zero = head.T_robot_from_head(-head.zero_offsets_deg)  # the joints at their true zero: the plate unturned
+    np.testing.assert_allclose(zero, make_pose(None, head.points[1]), atol=1e-12)
+    mount = [np.linalg.inv(head.T_robot_from_head(a)) @ head.T_robot_from_projector(a)
+             for a in ([0, 0, 0], [35, -20, 0], [-60, 15, 4])]
+    for T in mount[1:]:  # whatever the angles, the projector holds still on the head
+        np.testing.assert_allclose(T, mount[0], atol=1e-12)
+    roll_zero = -head.zero_offsets_deg[2]  # the roll joint (about a line beside the tilt point) at its true zero
+    turned = head.T_robot_from_head([35, -20, roll_zero])
+    # the pan (about z through points[0]) moves the tilt point; the tilt turns about it, moving it no further
+    pan_only = head.T_robot_from_head([35, -head.zero_offsets_deg[1], roll_zero])
+    np.testing.assert_allclose(turned[:3, 3], pan_only[:3, 3], atol=1e-12)
+    assert not np.allclose(turned[:3, 3], head.points[1], atol=1e-3)
+
+
 def test_rig_with_a_broken_pose_is_refused(tmp_path: Path) -> None:
     Rig(poses={"T_robot_from_camera_left": np.eye(4)}).save(tmp_path)
     text = (tmp_path / "rig.yaml").read_text().replace("[1.0, 0.0, 0.0, 0.0]", "[2.0, 0.0, 0.0, 0.0]", 1)

@@ -46,3 +46,15 @@ def test_a_peak_cut_by_the_pass_end_is_kept_at_its_top_only_when_asked():
     assert peak.position == pytest.approx(0.01, abs=0.001) and np.isnan(peak.width)
     # a slope falling from the pass's start has no top inside the pass: nothing to trace from it here
     assert detect_peaks(u, 0.02 + 0.5 * np.exp(-0.5 * ((u + 0.01) / 0.012) ** 2), keep_cut=(True, True)) == []
+
+
+def test_a_pass_spanning_less_than_the_minimum_height_has_no_peak_and_one_spanning_it_does():
+    # the quick answer for flat passes must not drop a peak that clears the threshold by a little
+    from scanner.peaks import PeakConfig
+
+    x = np.arange(0.0, 0.4, 0.00025)
+    bump = np.exp(-0.5 * ((x - 0.2) / 0.01) ** 2)
+    cfg = PeakConfig()
+    assert detect_peaks(x, 0.03 + 0.99 * cfg.min_height * bump) == []
+    found = detect_peaks(x, 0.03 + 1.2 * cfg.min_height * bump)
+    assert [round(p.position, 3) for p in found] == [0.2]

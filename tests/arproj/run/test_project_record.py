@@ -36,17 +36,26 @@ def _pose(tr: object) -> np.ndarray:
     return T
 
 
+def _difference(T: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    """How far pose T lies from `truth`: (offset mm, rotation °)."""
+    error = invert(truth) @ T
+    return (float(np.linalg.norm(error[:3, 3]) * 1000),
+            float(np.degrees(np.arccos(np.clip((np.trace(error[:3, :3]) - 1) / 2, -1, 1)))))
+
+
 def test_the_session_bag_holds_tf_camera_info_frames_and_gate(tmp_path, monkeypatch):
     from arproj.session import session as session_module
 
     shown: list[np.ndarray] = []
     rigs: list = []
+    sites: list = []
     real_update = session_module.ProjectionSession.update
 
     def update(self, *args, **kwargs):  # the frames the session showed, and its rig, kept to compare
         decision = real_update(self, *args, **kwargs)
         shown.append(self.last_frame.copy())
         rigs.append(self.rig)
+        sites.append(self.robot.site)
         return decision
 
     monkeypatch.setattr(session_module.ProjectionSession, "update", update)
@@ -66,12 +75,21 @@ def test_the_session_bag_holds_tf_camera_info_frames_and_gate(tmp_path, monkeypa
         for tr in msg.transforms:
             assert parents.setdefault(tr.child_frame_id, tr.header.frame_id) == tr.header.frame_id
             poses[tr.child_frame_id] = _pose(tr)
-    assert parents == {"robot": "room", "projector": "robot", "camera_left": "robot", "camera_right": "camera_left"}
+    assert parents == {"robot": "room", "head": "robot", "projector": "head", "camera_left": "robot",
+                       "camera_right": "camera_left"}
     reg = result["registration"]
-    T_wall_from_projector = poses["robot"] @ poses["projector"]
+    T_wall_from_projector = poses["robot"] @ poses["head"] @ poses["projector"]
     np.testing.assert_allclose(T_wall_from_projector, reg["T_wall_from_projector"], atol=1e-9)
     np.testing.assert_allclose(poses["robot"], reg["T_wall_from_robot"], atol=1e-9)
-    rig = rigs[-1]
+    rig, site = rigs[-1], sites[-1]
+    # the head where the simulated site has it (its true joints and kinematics, against the calibrated model at
+    # the reported angles), and the projector on it where the site mounts it
+    for T, truth in ((poses["head"], site.T_robot_from_head),
+                     (poses["projector"], invert(site.T_robot_from_head) @ site.T_robot_from_projector)):
+        offset_mm, angle_deg = _difference(T, truth)
+        assert offset_mm < 5.0 and angle_deg < 1.0, (offset_mm, angle_deg)
+    # the head turned with the reported pan/tilt: its frame at the joints' zero is far from where it is
+    assert _difference(rig.head.T_robot_from_head([0.0, 0.0, 0.0]), site.T_robot_from_head)[1] > 5.0
     np.testing.assert_allclose(poses["camera_left"], rig.pose("T_robot_from_camera_left"), atol=1e-9)
     np.testing.assert_allclose(invert(poses["camera_right"]), rig.pose("T_camera_right_from_camera_left"), atol=1e-9)
     for name in ("projector", "camera_left", "camera_right"):
