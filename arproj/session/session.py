@@ -120,6 +120,7 @@ class ProjectionSession:
         self.last_pattern_capture: tuple | None = None  # (pattern, left image, right image, head angles)
         self.head_slipped = False  # the current registration found the head off where its encoder says
         self.last_words: list[str] = []  # what the last frame says in words (legend lines or warning)
+        self.last_legend: overlays.LegendLayout | None = None  # where the last map frame's legend went
         self.log: deque[str] = deque(maxlen=LOG_LINES)  # bounded: a session may run for days
 
     def __enter__(self) -> ProjectionSession:
@@ -386,7 +387,15 @@ class ProjectionSession:
         if self.drill_xy is not None:
             lines.append(f"drill: {self.drill_check(self.drill_xy).message}")
         self.last_words = slipped + lines  # the slip first: it is what the craftsman must act on
-        return overlays.draw_legend(frame, self.last_words)
+        busy, mapped = self.map_projector.legend_layers()
+        self.last_legend = overlays.legend_layout(frame.shape, self.last_words, self.legend_classes(), busy, mapped)
+        overlays.draw_layout(frame, self.last_legend)
+        return frame
+
+    def legend_classes(self) -> tuple[str, ...]:
+        """The classes the legend lists: those of the map's objects (the wall's, not every class there is)."""
+        raster = self.map_projector.map_raster
+        return raster.classes if raster is not None else tuple(sorted({o.cls for o in self.wall_map.objects}))
 
     def update(self, force: bool = False, show: bool = True) -> gate.GateDecision:
         """One cycle: re-estimate when needed, verify, decide, show (show=False: decide only, the frame not
