@@ -290,7 +290,7 @@ def _draw_scale_bar(img: NDArray[np.uint8], raster: WallRaster) -> None:
     added to raster.busy. Left out when the map has no free place for it."""
     s = raster.px_per_m
     h, w = img.shape[:2]
-    length_m = max([L for L in SCALE_BAR_LENGTHS_M if L <= 0.25 * raster.width_m] or [0.0])
+    length_m = max([n for n in SCALE_BAR_LENGTHS_M if n <= 0.25 * raster.width_m] or [0.0])
     if length_m == 0.0:
         return
     text = f"{length_m * 100:.0f} cm" if length_m < 1.0 else f"{length_m:.0f} m"
