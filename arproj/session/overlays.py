@@ -248,18 +248,21 @@ def draw_map(wall_map: WallMap, registration_sigma_m: float, drill_xy: NDArray[n
     for kind in DRAW_ORDER:
         for obj in (o for o in wall_map.objects if o.cls == kind):
             _draw_object(img, raster, obj, registration_sigma_m)
+    labels = np.zeros((h, w), dtype=bool)  # where depth labels are written: none is written over another
     for obj in wall_map.objects:
-        _draw_depth_label(img, raster, obj, registration_sigma_m)
+        _draw_depth_label(img, raster, obj, registration_sigma_m, labels)
     if drill_xy is not None:
         check = check_drill_point(wall_map, drill_xy, registration_sigma_m)
         draw_drill_marker(img, raster.to_px(drill_xy)[0], s, VERDICT_COLOR[check.verdict])
     raster.busy = np.any(img != before, axis=2)
     raster.classes = tuple(sorted({o.cls for o in wall_map.objects}))
-    _draw_scale_bar(img, raster)
-    if clip is not None:  # only the well-registered part is shown, its edge outlined in grey
-        inside = np.zeros((h, w), dtype=np.uint8)
+    inside = np.ones((h, w), dtype=np.uint8)
+    if clip is not None:
+        inside[:] = 0
         poly = np.round(raster.to_px(clip) * 16).astype(np.int32).reshape(-1, 1, 2)
         cv2.fillPoly(inside, [poly], 1, shift=4)
+    _draw_scale_bar(img, raster, inside.astype(bool))
+    if clip is not None:  # only the well-registered part is shown, its edge outlined in grey
         img[inside == 0] = 0
         raster.busy &= inside.astype(bool)
         cv2.polylines(img, [poly], True, (110, 110, 110, 255), max(2, round(0.004 * s)), cv2.LINE_AA, shift=4)
@@ -284,10 +287,10 @@ def draw_drill_marker(img: NDArray[np.uint8], centre_px: NDArray[np.float64], px
 SCALE_BAR_LENGTHS_M = (0.1, 0.2, 0.5, 1.0)
 
 
-def _draw_scale_bar(img: NDArray[np.uint8], raster: WallRaster) -> None:
+def _draw_scale_bar(img: NDArray[np.uint8], raster: WallRaster, shown: NDArray[np.bool_]) -> None:
     """A scale bar in wall metres (the longest of SCALE_BAR_LENGTHS_M up to a quarter of the map's width,
-    ticked every 10 cm, white outlined in black) where nothing else is drawn, nearest the bottom left;
-    added to raster.busy. Left out when the map has no free place for it."""
+    ticked every 10 cm, white outlined in black) where nothing else is drawn and the map is shown (shown:
+    (h, w) mask), nearest the bottom left; added to raster.busy. Left out when there is no free place."""
     s = raster.px_per_m
     h, w = img.shape[:2]
     length_m = max([n for n in SCALE_BAR_LENGTHS_M if n <= 0.25 * raster.width_m] or [0.0])
@@ -301,7 +304,7 @@ def _draw_scale_bar(img: NDArray[np.uint8], raster: WallRaster) -> None:
     pad = max(2, round(0.01 * s))
     box_w, box_h = max(bar_px, tw) + 2 * pad, bar_h + th + 3 * pad
     assert raster.busy is not None
-    found = free_box(raster.busy, box_w, box_h, prefer=(0.0, 1.0), step=max(1, pad))
+    found = free_box(raster.busy | ~shown, box_w, box_h, prefer=(0.0, 1.0), step=max(1, pad))
     if found is None:
         return
     x, y = found
@@ -415,7 +418,7 @@ DEPTH_UNKNOWN_WORDS = "depth unknown"
 
 
 def _draw_depth_label(img: NDArray[np.uint8], raster: WallRaster, obj: MappedObject,
-                      registration_sigma_m: float) -> None:
+                      registration_sigma_m: float, labels: NDArray[np.bool_]) -> None:
     """The object's depth ("32 mm deep", or "depth unknown" when the scan could not tell it) beside the middle
     of its longest measured stretch, outside its band; an outline's (a cavity's) at its centre."""
     parts = obj.parts(measured=True)
@@ -444,8 +447,17 @@ def _draw_depth_label(img: NDArray[np.uint8], raster: WallRaster, obj: MappedObj
     # the text's half-extent along the normal (with descenders and its dark outline) plus 3 mm of air
     half_px = 0.5 * (abs(normal[1]) * (th + baseline) + abs(normal[0]) * tw) + thick + 3
     offset = 0.0 if obj.is_outline else band_half_width_m(obj, registration_sigma_m) + 0.003 + half_px / s
-    c, r = raster.to_px((anchor + normal * offset)[None])[0]
-    org = (round(c - tw / 2), round(r + (th - baseline) / 2))
+    h, w = labels.shape
+    for side in (normal, -normal):  # the other side of the line when a label is already there
+        c, r = raster.to_px((anchor + side * offset)[None])[0]
+        org = (round(c - tw / 2), round(r + (th - baseline) / 2))
+        box = (slice(max(0, org[1] - th - thick - 2), max(0, min(h, org[1] + baseline + thick + 2))),
+               slice(max(0, org[0] - thick - 2), max(0, min(w, org[0] + tw + thick + 2))))
+        if not labels[box].any():
+            break
+    else:
+        return  # both sides taken (a cluster of small objects): one label there is enough to read
+    labels[box] = True
     cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0, 255), thick + 3, cv2.LINE_AA)
     cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (*CLASS_COLOR[obj.cls], 255), thick, cv2.LINE_AA)
 
@@ -489,10 +501,11 @@ BUSY_ALPHA, MAP_ALPHA = 255, 96
 
 def legend_layout(shape: tuple[int, ...], lines: list[str] | tuple[str, ...] = (),
                   present: tuple[str, ...] | list[str] | None = None, busy: NDArray[np.bool_] | None = None,
-                  mapped: NDArray[np.bool_] | None = None, corner: str = "top-left") -> LegendLayout:
+                  mapped: NDArray[np.bool_] | None = None, corner: str = "top-left",
+                  at: tuple[int, int] | None = None) -> LegendLayout:
     """The legend of a frame of `shape`: the classes present (None: every class) and the status lines (wrapped
     to stay inside the frame), placed over no busy pixel (objects, bands, labels, the drill marker), else
-    outside the map, nearest the preferred corner."""
+    outside the map, nearest the preferred corner (at: top-left corner given, e.g. to redraw a recorded one)."""
     h, w = shape[:2]
     scale = max(0.45, min(w, h) / 1400.0)
     thickness = max(1, round(scale * 2))
@@ -511,8 +524,8 @@ def legend_layout(shape: tuple[int, ...], lines: list[str] | tuple[str, ...] = (
     step = max(2, pad // 2)
     # A margin round the box: the legend never touches an object's band.
     grow = np.ones((2 * pad + 1, 2 * pad + 1), np.uint8)
-    placed, found = "free wall", None
-    if busy is not None:
+    placed, found = "free wall", at
+    if busy is not None and at is None:
         found = free_box(cv2.dilate(busy.astype(np.uint8), grow).astype(bool), box_w, box_h, prefer, step)
         if found is None and mapped is not None:
             placed = "outside the map"

@@ -373,6 +373,7 @@ class ProjectionSession:
         slipped = [SAY_HEAD_SLIPPED] if self.head_slipped else []
         if not decision.show_map or self.registration is None:
             self.last_words = decision.craftsman + [w for w in slipped if w not in decision.craftsman]
+            self.last_legend = None
             return overlays.warning_frame(intr.width, intr.height, self.last_words)
         trusted = self.registration.trusted
         clip = None if trusted is None else trusted.polygon
