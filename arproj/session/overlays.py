@@ -499,6 +499,31 @@ def frame_layers(alpha: NDArray[np.uint8]) -> tuple[NDArray[np.bool_], NDArray[n
 BUSY_ALPHA, MAP_ALPHA = 255, 96
 
 
+# The map frame's status lines, in the craftsman's words (the figures behind them go to the log). One place for
+# the one-wall session and the room session alike.
+def say_accuracy(bound_m: float, walls: list[int] | None = None) -> str:
+    """How far the picture may be off (95 %), and on which walls when there are several."""
+    where = "" if walls is None else " on wall " + ", ".join(str(i) for i in walls)
+    mm = bound_m * 1000
+    return f"Picture accurate to {mm:.1f} mm{where}." if mm < 10 else f"Picture accurate to {mm:.0f} mm{where}."
+
+
+def say_clipped(share: float) -> str:
+    return f"Shown only where accurate enough ({100 * share:.0f} % of the map, outlined); outside it nothing is known."
+
+
+def say_zones() -> str:
+    return f"Hatched: not scanned ({tol.DIN_ZONE_WORDS}). Do not drill there."
+
+
+def say_dark_walls(walls: list[int]) -> str:
+    return "Wall " + ", ".join(str(i) for i in walls) + " not checked: left dark. Do not drill by it."
+
+
+def say_drill(check: DrillVerdict) -> str:
+    return f"Drill point - {check.message}"
+
+
 def legend_layout(shape: tuple[int, ...], lines: list[str] | tuple[str, ...] = (),
                   present: tuple[str, ...] | list[str] | None = None, busy: NDArray[np.bool_] | None = None,
                   mapped: NDArray[np.bool_] | None = None, corner: str = "top-left",

@@ -320,13 +320,12 @@ class RoomSession:
         assert T is not None
         frame = self.room_projector.render(T).copy()
         bound = max(v.decision.bound_m for v in shown.values())
-        lines = [f"registered: ±{bound * 1000:.1f} mm (95 %) on wall " + ", ".join(
-            str(self.walls[k].index) for k in shown)]
+        lines = [overlays.say_accuracy(bound, [self.walls[k].index for k in shown])]
         if any(r.zone_texels for r in rasters.values()):
-            lines.append(f"hatched: {tol.DIN_ZONE_WORDS} (not scanned)")
+            lines.append(overlays.say_zones())
         hidden = [self.walls[k].index for k in self.verdicts if k not in shown]
         if hidden:
-            lines.append("not checked, left dark: wall " + ", ".join(str(i) for i in hidden))
+            lines.append(overlays.say_dark_walls(hidden))
         self.last_words = lines
         assert self.room_projector.last_alpha is not None
         busy, mapped = overlays.frame_layers(self.room_projector.last_alpha)

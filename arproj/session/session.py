@@ -379,14 +379,14 @@ class ProjectionSession:
         clip = None if trusted is None else trusted.polygon
         self.map_projector.set_overlays(decision.registration_sigma_m, self.drill_xy, clip=clip)
         frame = self.map_projector.render(self.registration.T_wall_from_projector).copy()
-        lines = [f"registered: ±{decision.bound_m * 1000:.1f} mm (95 %)"]
+        lines = [overlays.say_accuracy(decision.bound_m)]
         if clip is not None:
-            lines.append(f"map limited to the well-registered {100 * trusted.share:.0f} % (outlined)")
+            lines.append(overlays.say_clipped(trusted.share))
         raster = self.map_projector.raster
         if raster is not None and raster.zone_texels:
-            lines.append(f"hatched: {tol.DIN_ZONE_WORDS} (not scanned)")
+            lines.append(overlays.say_zones())
         if self.drill_xy is not None:
-            lines.append(f"drill: {self.drill_check(self.drill_xy).message}")
+            lines.append(overlays.say_drill(self.drill_check(self.drill_xy)))
         self.last_words = slipped + lines  # the slip first: it is what the craftsman must act on
         busy, mapped = self.map_projector.legend_layers()
         self.last_legend = overlays.legend_layout(frame.shape, self.last_words, self.legend_classes(), busy, mapped)
