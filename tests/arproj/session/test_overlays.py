@@ -141,7 +141,7 @@ def test_map_frame_words_are_the_craftsmans_and_stay_inside_the_frame(size):
         assert "://" not in line and line.isascii() and line[0].isupper(), line
     layout = overlays.legend_layout((h, w, 3), lines, ("power_line",))
     x, y, box_w, box_h = layout.box
-    assert 0 <= x and x + box_w < w and 0 <= y and y + box_h < h
+    assert x >= 0 and y >= 0 and x + box_w < w and y + box_h < h
     text_x = x + int(48 * layout.scale)
     for text, _, _ in layout.entries:
         (tw, _), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, layout.scale, layout.thickness)
