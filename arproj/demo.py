@@ -133,9 +133,12 @@ class DemoContext:
             from arproj.sim.site import Site
 
             cx, cy = self.aim_point()
+            # Colour cameras (Bayer sensors): the photograph shows the map's colour code as the eye sees it;
+            # the wall pose and the closed loop read their luminance, as they would a real colour camera's.
             overrides: dict[str, Any] = {"robot": {"distance_m": self.robot_distance_m(),
                                                    "incidence_deg": ROBOT_INCIDENCE_DEG,
-                                                   "along_m": cx, "aim_height_m": cy}}
+                                                   "along_m": cx, "aim_height_m": cy},
+                                         "cameras": {"color": True}}
             width = max(5.0, self.wall.width_m + 0.5)
             if width > 5.0 or self.wall.height_m > 2.6:  # room large enough for the wall file's wall
                 overrides["room"] = {"corners_m": [[width, 0.0], [0.0, 0.0], [0.0, 4.0], [width, 4.0]],
@@ -520,8 +523,8 @@ def stage_photograph(ctx: DemoContext) -> None:
     ctx.figures["photograph"] = {"camera": "camera_left", "exposure ms": 1000 * photo.exposure_s,
                                  "truth objects in view": drawn, "wall in the photo %": 100 * float(lit.mean()),
                                  "head (pan, tilt) deg": [round(a, 3) for a in session.head_deg()]}
-    ctx.picture("photo_on_wall.png", "The wall photographed by the robot's left camera with the map projected on it "
-                "(as the paper's figure 16).", "photograph")
+    ctx.picture("photo_on_wall.png", "The wall photographed by the robot's left camera (a colour camera: Bayer "
+                "sensor, demosaiced) with the map projected on it (as the paper's figure 16).", "photograph")
     ctx.picture("photo_with_truth.png", f"The same photograph with the wall file's truth drawn in "
                 f"{TRUTH_ON_PHOTO_TEXT} (exact camera pose of the simulation): where the projected lines should be.",
                 "photograph")

@@ -99,7 +99,7 @@ def _latency(session: object, quick: bool) -> Latency:
         T = reg.T_wall_from_projector @ jitter
         t0 = time.perf_counter()
         frame = mp.render(T).copy()
-        overlays.draw_legend(frame, ["registered"])
+        overlays.draw_legend(frame, ["registered"], mp.map_raster.classes, *mp.legend_layers())
         times.append(time.perf_counter() - t0)
     raster = mp.raster
     H = _homography(reg.T_wall_from_projector, intr, raster)

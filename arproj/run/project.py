@@ -300,6 +300,10 @@ def _run(session_cls: type, rig: Rig, wall_map: WallMap, robot: object, options:
             cycle = {"cycle": k, "show_map": decision.show_map, "reasons": decision.reasons,
                      "bound_mm": None if not np.isfinite(decision.bound_m) else round(decision.bound_m * 1000, 3),
                      "frame_says": list(session.last_words)}
+            legend = session.last_legend
+            if decision.show_map and legend is not None:  # where the legend went, what it lists
+                cycle["legend"] = {"box": list(legend.box), "placed": legend.placed,
+                                   "classes": list(session.legend_classes())}
             reg = session.registration
             if reg is not None and reg.loop is not None and len(reg.loop.errors_xy):
                 e = np.linalg.norm(reg.loop.errors_xy, axis=1) * 1000

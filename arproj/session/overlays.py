@@ -43,7 +43,12 @@ CLASS_COLOR: dict[str, tuple[int, int, int]] = {c: colour for _, colour, classes
 DRAW_ORDER = ("cavity", "non_metal", "fastener", "metal", "metal_pipe", "power_line")
 
 VERDICT_SAFE, VERDICT_KEEP_AWAY, VERDICT_UNKNOWN = drill.SAFE, drill.KEEP_AWAY, drill.UNKNOWN
-VERDICT_COLOR = {VERDICT_SAFE: (60, 255, 60), VERDICT_KEEP_AWAY: (255, 40, 40), VERDICT_UNKNOWN: (255, 200, 0)}
+# The drill marker's colours are never a class's: each is at least MIN_VERDICT_DELTA_E (CIEDE2000) from every
+# class colour and from the other verdicts (keep-away is magenta, not the power line's red; unknown is orange,
+# not "other metal"'s yellow), and the marker is a ringed cross outlined in black, a shape no class has.
+VERDICT_COLOR = {VERDICT_SAFE: (150, 255, 45), VERDICT_KEEP_AWAY: (255, 0, 135), VERDICT_UNKNOWN: (240, 135, 0)}
+MIN_VERDICT_DELTA_E = 20.0
+MARKER_OUTLINE = (0, 0, 0)
 INFERRED_DASH_M = 0.03  # inferred stretches: 3 cm dashes, 3 cm gaps
 
 
@@ -140,6 +145,10 @@ class WallRaster:
     px_per_m: float
     zone_texels: int = 0  # texels drawn as a DIN zone (unscanned), and the zones' labels written
     zone_labels: int = 0
+    # (h, w) True under what the craftsman must see (objects, their bands, labels, the drill marker, the
+    # scale bar): the legend never covers it. None: nothing marked (e.g. the closed loop's check marks).
+    busy: NDArray[np.bool_] | None = None
+    classes: tuple[str, ...] = ()  # the classes drawn, in LEGEND order: the legend lists only these
 
     @property
     def width_m(self) -> float:
@@ -235,30 +244,108 @@ def draw_map(wall_map: WallMap, registration_sigma_m: float, drill_xy: NDArray[n
                tol.DIN_ZONE_OPACITY)
         raster.zone_labels = _label_zones(img, zones, raster, zone_rects(wall_map))
         raster.zone_texels = int(zones.sum())
+    before = img.copy()
     for kind in DRAW_ORDER:
         for obj in (o for o in wall_map.objects if o.cls == kind):
             _draw_object(img, raster, obj, registration_sigma_m)
+    labels = np.zeros((h, w), dtype=bool)  # where depth labels are written: none is written over another
     for obj in wall_map.objects:
-        _draw_depth_label(img, raster, obj, registration_sigma_m)
+        _draw_depth_label(img, raster, obj, registration_sigma_m, labels)
     if drill_xy is not None:
         check = check_drill_point(wall_map, drill_xy, registration_sigma_m)
-        colour = VERDICT_COLOR[check.verdict]
-        c = raster.to_px(drill_xy)[0]
-        r = 0.03 * s
-        th = max(2, round(0.004 * s))
-        for d in ((r, 0), (0, r)):
-            p0 = (round(c[0] - d[0]), round(c[1] - d[1]))
-            p1 = (round(c[0] + d[0]), round(c[1] + d[1]))
-            cv2.line(img, p0, p1, (*colour, 255), th, cv2.LINE_AA)
-        cv2.circle(img, (round(c[0]), round(c[1])), round(0.6 * r), (*colour, 255), th,
-                   cv2.LINE_AA)
-    if clip is not None:  # only the well-registered part is shown, its edge outlined in grey
-        inside = np.zeros((h, w), dtype=np.uint8)
+        draw_drill_marker(img, raster.to_px(drill_xy)[0], s, VERDICT_COLOR[check.verdict])
+    raster.busy = np.any(img != before, axis=2)
+    raster.classes = tuple(sorted({o.cls for o in wall_map.objects}))
+    inside = np.ones((h, w), dtype=np.uint8)
+    if clip is not None:
+        inside[:] = 0
         poly = np.round(raster.to_px(clip) * 16).astype(np.int32).reshape(-1, 1, 2)
         cv2.fillPoly(inside, [poly], 1, shift=4)
+    _draw_scale_bar(img, raster, inside.astype(bool))
+    if clip is not None:  # only the well-registered part is shown, its edge outlined in grey
         img[inside == 0] = 0
+        raster.busy &= inside.astype(bool)
         cv2.polylines(img, [poly], True, (110, 110, 110, 255), max(2, round(0.004 * s)), cv2.LINE_AA, shift=4)
     return raster
+
+
+def draw_drill_marker(img: NDArray[np.uint8], centre_px: NDArray[np.float64], px_per_m: float,
+                      colour: tuple[int, int, int]) -> None:
+    """The drill point: a ringed cross (a shape no class has: classes are lines, bands and hatched outlines)
+    in its verdict colour, outlined in black so it stands out on every class colour and on the bare wall."""
+    c = (round(float(centre_px[0])), round(float(centre_px[1])))
+    r = 0.03 * px_per_m
+    th = max(2, round(0.004 * px_per_m))
+    outline = th + 2 * max(2, round(0.003 * px_per_m))
+    for ink, width in (((*MARKER_OUTLINE, 255), outline), ((*colour, 255), th)):
+        for dx, dy in ((r, 0.0), (0.0, r)):
+            cv2.line(img, (round(c[0] - dx), round(c[1] - dy)), (round(c[0] + dx), round(c[1] + dy)), ink, width,
+                     cv2.LINE_8)
+        cv2.circle(img, c, round(0.6 * r), ink, width, cv2.LINE_8)
+
+
+SCALE_BAR_LENGTHS_M = (0.1, 0.2, 0.5, 1.0)
+
+
+def _draw_scale_bar(img: NDArray[np.uint8], raster: WallRaster, shown: NDArray[np.bool_]) -> None:
+    """A scale bar in wall metres (the longest of SCALE_BAR_LENGTHS_M up to a quarter of the map's width,
+    ticked every 10 cm, white outlined in black) where nothing else is drawn and the map is shown (shown:
+    (h, w) mask), nearest the bottom left; added to raster.busy. Left out when there is no free place."""
+    s = raster.px_per_m
+    h, w = img.shape[:2]
+    length_m = max([n for n in SCALE_BAR_LENGTHS_M if n <= 0.25 * raster.width_m] or [0.0])
+    if length_m == 0.0:
+        return
+    text = f"{length_m * 100:.0f} cm" if length_m < 1.0 else f"{length_m:.0f} m"
+    scale = DEPTH_LABEL_HEIGHT_M * s / 22.0
+    thick = max(1, round(scale * 2))
+    (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
+    bar_px, bar_h = round(length_m * s), max(3, round(0.008 * s))
+    pad = max(2, round(0.01 * s))
+    box_w, box_h = max(bar_px, tw) + 2 * pad, bar_h + th + 3 * pad
+    assert raster.busy is not None
+    found = free_box(raster.busy | ~shown, box_w, box_h, prefer=(0.0, 1.0), step=max(1, pad))
+    if found is None:
+        return
+    x, y = found
+    x0, y_bar = x + pad, y + box_h - pad - bar_h
+    cv2.rectangle(img, (x0 - 2, y_bar - 2), (x0 + bar_px + 2, y_bar + bar_h + 2), (0, 0, 0, 255), -1)
+    cv2.rectangle(img, (x0, y_bar), (x0 + bar_px, y_bar + bar_h), (255, 255, 255, 255), -1)
+    for k in range(1, round(length_m / 0.1)):  # ticks every 10 cm
+        tx = x0 + round(k * 0.1 * s)
+        cv2.line(img, (tx, y_bar), (tx, y_bar + bar_h), (0, 0, 0, 255), max(1, bar_h // 3))
+    org = (x0, y_bar - pad)
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0, 255), thick + 3, cv2.LINE_AA)
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255, 255), thick, cv2.LINE_AA)
+    raster.busy[max(0, y):min(h, y + box_h), max(0, x):min(w, x + box_w)] = True
+
+
+def free_box(busy: NDArray[np.bool_], box_w: int, box_h: int, prefer: tuple[float, float] = (0.0, 0.0),
+             step: int = 4, least: bool = False) -> tuple[int, int] | None:
+    """Top-left (x, y) of a box_w × box_h box over no True pixel of busy (h, w), nearest the preferred corner
+    prefer = (fx, fy) (fractions of the free range: (0, 0) top left, (1, 1) bottom right). None when no such
+    box fits, or (least=True) the box over fewest busy pixels."""
+    h, w = busy.shape
+    if box_w > w or box_h > h:
+        return None
+    ys = np.arange(0, h - box_h + 1, step)
+    xs = np.arange(0, w - box_w + 1, step)
+    ys = np.unique(np.append(ys, h - box_h))
+    xs = np.unique(np.append(xs, w - box_w))
+
+    def box_sums(mask: NDArray[np.bool_]) -> NDArray[np.int64]:
+        integral = cv2.integral(mask.astype(np.uint8), sdepth=cv2.CV_32S).astype(np.int64)
+        Y, X = np.meshgrid(ys, xs, indexing="ij")
+        return integral[Y + box_h, X + box_w] - integral[Y, X + box_w] - integral[Y + box_h, X] + integral[Y, X]
+
+    hits = box_sums(busy)
+    if not least and not (hits == 0).any():
+        return None
+    Y, X = np.meshgrid(ys, xs, indexing="ij")
+    cost = np.hypot(X - prefer[0] * (w - box_w), Y - prefer[1] * (h - box_h)).astype(np.float64)
+    cost += hits.astype(np.float64) * (4.0 * (w + h))  # one pixel covered weighs more than any distance
+    i, j = np.unravel_index(int(np.argmin(cost)), cost.shape)
+    return int(xs[j]), int(ys[i])
 
 
 def _distance_field(raster: WallRaster, obj: MappedObject, reach_m: float,
@@ -327,18 +414,20 @@ def _draw_object(img: NDArray[np.uint8], raster: WallRaster, obj: MappedObject, 
 
 
 DEPTH_LABEL_HEIGHT_M = 0.025  # text 2.5 cm high on the wall: legible from a few metres
+DEPTH_UNKNOWN_WORDS = "depth unknown"
 
 
 def _draw_depth_label(img: NDArray[np.uint8], raster: WallRaster, obj: MappedObject,
-                      registration_sigma_m: float) -> None:
-    """The object's depth ("32 mm deep") beside the middle of its first measured stretch, outside its band."""
-    if obj.depth_m is None or obj.is_outline:
-        return
+                      registration_sigma_m: float, labels: NDArray[np.bool_]) -> None:
+    """The object's depth ("32 mm deep", or "depth unknown" when the scan could not tell it) beside the middle
+    of its longest measured stretch, outside its band; an outline's (a cavity's) at its centre."""
     parts = obj.parts(measured=True)
     if not parts:
         return
     part = max(parts, key=lambda p: float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) if len(p) > 1 else 0.0)
-    if len(part) == 1:
+    if obj.is_outline:
+        anchor, normal = obj.points_m.mean(axis=0), np.zeros(2)
+    elif len(part) == 1:
         anchor, normal = part[0], np.array([1.0, 1.0]) / np.sqrt(2.0)
     else:
         seg = np.diff(part, axis=0)
@@ -350,16 +439,25 @@ def _draw_depth_label(img: NDArray[np.uint8], raster: WallRaster, obj: MappedObj
         normal = np.array([-direction[1], direction[0]])
         if normal[1] < 0 or (abs(normal[1]) < 1e-9 and normal[0] < 0):
             normal = -normal  # labels above or right of the line
-    text = f"{obj.depth_m * 1000:.0f} mm deep"
+    text = DEPTH_UNKNOWN_WORDS if obj.depth_m is None else f"{obj.depth_m * 1000:.0f} mm deep"
     s = raster.px_per_m
     scale = DEPTH_LABEL_HEIGHT_M * s / 22.0  # FONT_HERSHEY_SIMPLEX is ~22 px high at scale 1
     thick = max(1, round(scale * 2))
     (tw, th), baseline = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
     # the text's half-extent along the normal (with descenders and its dark outline) plus 3 mm of air
     half_px = 0.5 * (abs(normal[1]) * (th + baseline) + abs(normal[0]) * tw) + thick + 3
-    offset = band_half_width_m(obj, registration_sigma_m) + 0.003 + half_px / s
-    c, r = raster.to_px((anchor + normal * offset)[None])[0]
-    org = (round(c - tw / 2), round(r + (th - baseline) / 2))
+    offset = 0.0 if obj.is_outline else band_half_width_m(obj, registration_sigma_m) + 0.003 + half_px / s
+    h, w = labels.shape
+    for side in (normal, -normal):  # the other side of the line when a label is already there
+        c, r = raster.to_px((anchor + side * offset)[None])[0]
+        org = (round(c - tw / 2), round(r + (th - baseline) / 2))
+        box = (slice(max(0, org[1] - th - thick - 2), max(0, min(h, org[1] + baseline + thick + 2))),
+               slice(max(0, org[0] - thick - 2), max(0, min(w, org[0] + tw + thick + 2))))
+        if not labels[box].any():
+            break
+    else:
+        return  # both sides taken (a cluster of small objects): one label there is enough to read
+    labels[box] = True
     cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0, 255), thick + 3, cv2.LINE_AA)
     cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (*CLASS_COLOR[obj.cls], 255), thick, cv2.LINE_AA)
 
@@ -377,27 +475,114 @@ def check_drill_point(wall_map: WallMap, xy: NDArray[np.float64], registration_s
 
 
 # -- projector-space parts: legend and status ---------------------------------------------------------------
-def draw_legend(frame: NDArray[np.uint8], lines: list[str] = (), corner: str = "top-left") -> NDArray[np.uint8]:
-    """Draws the class legend (and status lines) into an RGB frame (h, w, 3) in place; returns it."""
-    h, w = frame.shape[:2]
+@dataclass
+class LegendLayout:
+    """Where the legend goes in a frame and what it says: entries (text, colour, is a class swatch), its box
+    (x, y, width, height) in frame pixels, and where it was put ("free wall", "outside the map", "over the map":
+    no free place was large enough)."""
+
+    entries: list[tuple[str, tuple[int, int, int], bool]]
+    box: tuple[int, int, int, int]
+    placed: str
+    scale: float
+    thickness: int
+    line_h: int
+
+
+def frame_layers(alpha: NDArray[np.uint8]) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """(busy, mapped) masks of a rendered frame from its alpha channel (projection.textured_mesh encodes the
+    raster's busy texels as BUSY_ALPHA, the rest of the map as MAP_ALPHA): what the legend must not cover,
+    and where the map is at all."""
+    return alpha >= (BUSY_ALPHA + MAP_ALPHA) // 2, alpha >= MAP_ALPHA // 2
+
+
+BUSY_ALPHA, MAP_ALPHA = 255, 96
+
+
+# The map frame's status lines, in the craftsman's words (the figures behind them go to the log). One place for
+# the one-wall session and the room session alike.
+def say_accuracy(bound_m: float, walls: list[int] | None = None) -> str:
+    """How far the picture may be off (95 %), and on which walls when there are several."""
+    where = "" if walls is None else " on wall " + ", ".join(str(i) for i in walls)
+    mm = bound_m * 1000
+    return f"Picture accurate to {mm:.1f} mm{where}." if mm < 10 else f"Picture accurate to {mm:.0f} mm{where}."
+
+
+def say_clipped(share: float) -> str:
+    return f"Shown only where accurate enough ({100 * share:.0f} % of the map, outlined); outside it nothing is known."
+
+
+def say_zones() -> str:
+    return f"Hatched: not scanned ({tol.DIN_ZONE_WORDS}). Do not drill there."
+
+
+def say_dark_walls(walls: list[int]) -> str:
+    return "Wall " + ", ".join(str(i) for i in walls) + " not checked: left dark. Do not drill by it."
+
+
+def say_drill(check: DrillVerdict) -> str:
+    return f"Drill point - {check.message}"
+
+
+def legend_layout(shape: tuple[int, ...], lines: list[str] | tuple[str, ...] = (),
+                  present: tuple[str, ...] | list[str] | None = None, busy: NDArray[np.bool_] | None = None,
+                  mapped: NDArray[np.bool_] | None = None, corner: str = "top-left",
+                  at: tuple[int, int] | None = None) -> LegendLayout:
+    """The legend of a frame of `shape`: the classes present (None: every class) and the status lines (wrapped
+    to stay inside the frame), placed over no busy pixel (objects, bands, labels, the drill marker), else
+    outside the map, nearest the preferred corner (at: top-left corner given, e.g. to redraw a recorded one)."""
+    h, w = shape[:2]
     scale = max(0.45, min(w, h) / 1400.0)
     thickness = max(1, round(scale * 2))
     line_h = int(34 * scale)
-    entries = [(label, colour) for label, colour, _ in LEGEND] + [(text, (255, 255, 255)) for text in lines]
-    box_w = int(max(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness)[0][0] for t, _ in entries)
-                + 60 * scale)
-    box_h = line_h * len(entries) + int(12 * scale)
-    x = int(12 * scale) if "left" in corner else w - box_w - int(12 * scale)
-    y = int(12 * scale) if "top" in corner else h - box_h - int(12 * scale)
+    pad = int(12 * scale)
+    classes = [(label, colour, True) for label, colour, kinds in LEGEND
+               if present is None or any(k in present for k in kinds)]
+    text_w = w - 2 * pad - int(60 * scale)
+    status = [(part, (255, 255, 255), False) for text in lines for part in _wrap(text, text_w, scale, thickness)]
+    entries = classes + status
+    widest = max((cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness)[0][0] for t, _, _ in entries),
+                 default=0)
+    box_w = min(w - 2, int(widest + 60 * scale))
+    box_h = min(h - 2, line_h * len(entries) + int(12 * scale))
+    prefer = (0.0 if "left" in corner else 1.0, 0.0 if "top" in corner else 1.0)
+    step = max(2, pad // 2)
+    # A margin round the box: the legend never touches an object's band.
+    grow = np.ones((2 * pad + 1, 2 * pad + 1), np.uint8)
+    placed, found = "free wall", at
+    if busy is not None and at is None:
+        found = free_box(cv2.dilate(busy.astype(np.uint8), grow).astype(bool), box_w, box_h, prefer, step)
+        if found is None and mapped is not None:
+            placed = "outside the map"
+            found = free_box(mapped, box_w, box_h, prefer, step)
+        if found is None:
+            placed = "over the map"
+            found = free_box(busy, box_w, box_h, prefer, step, least=True)
+    if found is None:  # nothing known about the frame: the preferred corner
+        found = (pad if prefer[0] == 0.0 else w - box_w - pad, pad if prefer[1] == 0.0 else h - box_h - pad)
+    return LegendLayout(entries, (found[0], found[1], box_w, box_h), placed, scale, thickness, line_h)
+
+
+def draw_legend(frame: NDArray[np.uint8], lines: list[str] | tuple[str, ...] = (),
+                present: tuple[str, ...] | list[str] | None = None, busy: NDArray[np.bool_] | None = None,
+                mapped: NDArray[np.bool_] | None = None, corner: str = "top-left") -> NDArray[np.uint8]:
+    """Draws the class legend (the classes present) and status lines into an RGB frame (h, w, 3) in place,
+    where legend_layout puts it; returns the frame."""
+    draw_layout(frame, legend_layout(frame.shape, lines, present, busy, mapped, corner))
+    return frame
+
+
+def draw_layout(frame: NDArray[np.uint8], layout: LegendLayout) -> None:
+    x, y, box_w, box_h = layout.box
+    scale, line_h = layout.scale, layout.line_h
     cv2.rectangle(frame, (x, y), (x + box_w, y + box_h), (30, 30, 30), -1)
-    for i, (text, colour) in enumerate(entries):
+    for i, (text, colour, swatch) in enumerate(layout.entries):
         ty = y + int(8 * scale) + line_h * i
-        if i < len(LEGEND):
+        if swatch:
             cv2.rectangle(frame, (x + int(8 * scale), ty + int(6 * scale)),
                           (x + int(38 * scale), ty + line_h - int(6 * scale)), colour, -1)
         cv2.putText(frame, text, (x + int(48 * scale), ty + line_h - int(9 * scale)), cv2.FONT_HERSHEY_SIMPLEX,
-                    scale, colour, thickness, cv2.LINE_AA)
-    return frame
+                    scale, colour, layout.thickness, cv2.LINE_AA)
 
 
 def _wrap(text: str, max_width_px: int, scale: float, thickness: int) -> list[str]:

@@ -27,10 +27,17 @@ CHECK_MARK_RADIUS_M = 0.008
 
 
 def textured_mesh(wall_map: WallMap, raster: overlays.WallRaster) -> trimesh.Trimesh:
-    """The map's mesh with UVs that put the raster at the vertices' wall (x, y)."""
+    """The map's mesh with UVs that put the raster at the vertices' wall (x, y). Its texture's alpha tells
+    the frame what lies under each pixel (overlays.frame_layers): BUSY_ALPHA on the raster's busy texels,
+    MAP_ALPHA on the rest of what it draws, 0 where it draws nothing."""
     mesh = wall_map.mesh
     uv = raster.uv(np.asarray(mesh.vertices)[:, :2])
-    material = trimesh.visual.material.SimpleMaterial(image=Image.fromarray(raster.image, "RGBA"))
+    image = raster.image
+    if raster.busy is not None:
+        image = image.copy()
+        drawn = image[..., 3] > 0
+        image[..., 3] = np.where(raster.busy, overlays.BUSY_ALPHA, np.where(drawn, overlays.MAP_ALPHA, 0))
+    material = trimesh.visual.material.SimpleMaterial(image=Image.fromarray(image, "RGBA"))
     return trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=False,
                            visual=trimesh.visual.TextureVisuals(uv=uv, material=material))
 
@@ -64,6 +71,7 @@ class MapProjector:
         self._keys: dict[str, tuple | None] = {"map": None, "marks": None}
         self._rasters: dict[str, overlays.WallRaster | None] = {"map": None, "marks": None}
         self._active = "map"
+        self.last_alpha: NDArray[np.uint8] | None = None  # the last frame's alpha (overlays.frame_layers)
 
     @property
     def raster(self) -> overlays.WallRaster | None:
@@ -112,7 +120,14 @@ class MapProjector:
         self._show("marks", key, lambda: check_mark_raster(self.wall_map, marks_xy, radius_m))
 
     def render(self, T_wall_from_projector: ArrayLike) -> NDArray[np.uint8]:
-        """The pre-warped frame (h, w, 3) uint8 RGB for the projector at T_wall_from_projector."""
+        """The pre-warped frame (h, w, 3) uint8 RGB for the projector at T_wall_from_projector (its alpha, what
+        lies under each pixel, kept in last_alpha)."""
         if self._keys[self._active] is None:
             self.set_overlays(tol.DEFAULT_MAP_SIGMA_M)
-        return self._renderers[self._active].render(self.projector, T_wall_from_projector).color
+        rgba = self._renderers[self._active].render(self.projector, T_wall_from_projector, alpha=True).color
+        self.last_alpha = rgba[..., 3]
+        return np.ascontiguousarray(rgba[..., :3])
+
+    def legend_layers(self) -> tuple[NDArray[np.bool_] | None, NDArray[np.bool_] | None]:
+        """(busy, mapped) pixel masks of the last frame (overlays.frame_layers); None before any."""
+        return (None, None) if self.last_alpha is None else overlays.frame_layers(self.last_alpha)

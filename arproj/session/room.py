@@ -177,6 +177,7 @@ class RoomProjector:
         self._renderer = MeshRenderer(ctx=ctx, max_error_px=PROJECTED_ERROR_PX)  # type: ignore[arg-type]
         self._key: tuple | None = None
         self._empty = True
+        self.last_alpha: NDArray[np.uint8] | None = None  # the last frame's alpha (overlays.frame_layers)
 
     def __enter__(self) -> RoomProjector:
         return self
@@ -210,8 +211,11 @@ class RoomProjector:
     def render(self, T_room_from_projector: NDArray[np.float64]) -> NDArray[np.uint8]:
         """The pre-warped frame (h, w, 3) uint8; black where no wall is drawn."""
         if self._empty:
+            self.last_alpha = np.zeros((self.projector.height, self.projector.width), dtype=np.uint8)
             return np.zeros((self.projector.height, self.projector.width, 3), dtype=np.uint8)
-        return self._renderer.render(self.projector, T_room_from_projector).color
+        rgba = self._renderer.render(self.projector, T_room_from_projector, alpha=True).color
+        self.last_alpha = rgba[..., 3]
+        return np.ascontiguousarray(rgba[..., :3])
 
 
 @dataclass
@@ -396,12 +400,14 @@ class RoomSession:
         assert T is not None
         frame = self.room_projector.render(T).copy()
         bound = max(v.decision.bound_m for v in shown.values())
-        lines = [f"registered: ±{bound * 1000:.1f} mm (95 %) on wall " + ", ".join(
-            str(self.walls[k].index) for k in shown)]
+        lines = [overlays.say_accuracy(bound, [self.walls[k].index for k in shown])]
         if any(r.zone_texels for r in rasters.values()):
-            lines.append(f"hatched: {tol.DIN_ZONE_WORDS} (not scanned)")
+            lines.append(overlays.say_zones())
         hidden = [self.walls[k].index for k in self.verdicts if k not in shown]
         if hidden:
-            lines.append("not checked, left dark: wall " + ", ".join(str(i) for i in hidden))
+            lines.append(overlays.say_dark_walls(hidden))
         self.last_words = lines
-        return overlays.draw_legend(frame, lines)
+        assert self.room_projector.last_alpha is not None
+        busy, mapped = overlays.frame_layers(self.room_projector.last_alpha)
+        present = tuple(sorted({c for r in rasters.values() for c in r.classes}))
+        return overlays.draw_legend(frame, lines, present, busy, mapped)

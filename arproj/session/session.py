@@ -120,6 +120,7 @@ class ProjectionSession:
         self.last_pattern_capture: tuple | None = None  # (pattern, left image, right image, head angles)
         self.head_slipped = False  # the current registration found the head off where its encoder says
         self.last_words: list[str] = []  # what the last frame says in words (legend lines or warning)
+        self.last_legend: overlays.LegendLayout | None = None  # where the last map frame's legend went
         self.log: deque[str] = deque(maxlen=LOG_LINES)  # bounded: a session may run for days
 
     def __enter__(self) -> ProjectionSession:
@@ -372,21 +373,30 @@ class ProjectionSession:
         slipped = [SAY_HEAD_SLIPPED] if self.head_slipped else []
         if not decision.show_map or self.registration is None:
             self.last_words = decision.craftsman + [w for w in slipped if w not in decision.craftsman]
+            self.last_legend = None
             return overlays.warning_frame(intr.width, intr.height, self.last_words)
         trusted = self.registration.trusted
         clip = None if trusted is None else trusted.polygon
         self.map_projector.set_overlays(decision.registration_sigma_m, self.drill_xy, clip=clip)
         frame = self.map_projector.render(self.registration.T_wall_from_projector).copy()
-        lines = [f"registered: ±{decision.bound_m * 1000:.1f} mm (95 %)"]
+        lines = [overlays.say_accuracy(decision.bound_m)]
         if clip is not None:
-            lines.append(f"map limited to the well-registered {100 * trusted.share:.0f} % (outlined)")
+            lines.append(overlays.say_clipped(trusted.share))
         raster = self.map_projector.raster
         if raster is not None and raster.zone_texels:
-            lines.append(f"hatched: {tol.DIN_ZONE_WORDS} (not scanned)")
+            lines.append(overlays.say_zones())
         if self.drill_xy is not None:
-            lines.append(f"drill: {self.drill_check(self.drill_xy).message}")
+            lines.append(overlays.say_drill(self.drill_check(self.drill_xy)))
         self.last_words = slipped + lines  # the slip first: it is what the craftsman must act on
-        return overlays.draw_legend(frame, self.last_words)
+        busy, mapped = self.map_projector.legend_layers()
+        self.last_legend = overlays.legend_layout(frame.shape, self.last_words, self.legend_classes(), busy, mapped)
+        overlays.draw_layout(frame, self.last_legend)
+        return frame
+
+    def legend_classes(self) -> tuple[str, ...]:
+        """The classes the legend lists: those of the map's objects (the wall's, not every class there is)."""
+        raster = self.map_projector.map_raster
+        return raster.classes if raster is not None else tuple(sorted({o.cls for o in self.wall_map.objects}))
 
     def update(self, force: bool = False, show: bool = True) -> gate.GateDecision:
         """One cycle: re-estimate when needed, verify, decide, show (show=False: decide only, the frame not

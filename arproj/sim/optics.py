@@ -7,7 +7,10 @@ blur per fragment from a few pre-blurred levels.
 Camera: radiance (cd/m²) and depth on the sensor grid (the renderer draws an enlarged pinhole, warped by the
 lens distortion of render.distortion) are blurred by lens and defocus, dimmed by cos⁴ vignetting,
 turned into electrons (exposure · responsivity · a fixed per-pixel response, PRNU), given shot and read
-noise, clipped at full well, gamma encoded and quantised to 8 bits.
+noise, clipped at full well, gamma encoded and quantised to 8 bits. A colour camera is a Bayer sensor: each
+pixel sees one of red, green, blue through an RGGB filter mosaic, the noise is that pixel's, and the photo's
+three channels are interpolated from the mosaic (OpenCV's edge-aware demosaicing) before the gamma — so a
+colour photo has the colour fringes and the per-channel noise of a real one.
 """
 
 from __future__ import annotations
@@ -99,6 +102,21 @@ def projector_light(image: NDArray, intr: Intrinsics, gamma: float, contrast_rat
 
 
 GAMMA_LUT_SIZE = 4096   # gamma through a lookup table: fast, and far below one 8-bit step of error
+# RGGB: red at even rows and columns, blue at odd ones, green between (OpenCV 5 names the pattern as it is).
+BAYER_DEMOSAIC = cv2.COLOR_BayerRGGB2RGB_EA
+
+
+def bayer_mosaic(rgb: NDArray[np.float32]) -> NDArray[np.float32]:
+    """(h, w) what an RGGB sensor's pixels see of (h, w, 3) light: each pixel the channel of its filter."""
+    out = np.ascontiguousarray(rgb[..., 1])
+    out[0::2, 0::2] = rgb[0::2, 0::2, 0]
+    out[1::2, 1::2] = rgb[1::2, 1::2, 2]
+    return out
+
+
+def demosaic(mosaic: NDArray[np.uint16]) -> NDArray[np.uint16]:
+    """(h, w, 3) RGB interpolated from an RGGB mosaic (h, w) of linear codes."""
+    return np.asarray(cv2.cvtColor(np.ascontiguousarray(mosaic), BAYER_DEMOSAIC), dtype=np.uint16)
 
 
 @lru_cache(maxsize=8)
@@ -179,12 +197,16 @@ class CameraModel:
     def expose(self, radiance: NDArray[np.float32], depth: NDArray[np.float32], exposure_s: float | None,
                rng: np.random.Generator | None, plan: BlurPlan | None = None) -> NDArray[np.uint8]:
         """The 8-bit photo from radiance on the sensor grid ((h, w) mono or (h, w, 3) colour, cd/m²) and depth
-        (h, w) metres (0: nothing): defocus, vignetting, exposure, shot and read noise, clipping, gamma.
-        plan: the defocus blur for this depth, if already worked out (blur_plan)."""
+        (h, w) metres (0: nothing): defocus, vignetting, exposure, (colour: the Bayer mosaic), shot and read
+        noise, clipping, (colour: demosaicing), gamma. plan: the defocus blur for this depth, if already worked
+        out (blur_plan)."""
         exposure = self.exposure_s if exposure_s is None else float(exposure_s)
         if not exposure > 0:
             raise InputError(f"exposure = {exposure_s!r} s must be positive")
         signal = (plan or self.blur_plan(depth)).apply(radiance)
+        colour = signal.ndim == 3
+        if colour:
+            signal = bayer_mosaic(signal)
         electrons = np.multiply(signal, self._gain(exposure), dtype=np.float32)  # a new array: in place below
         if rng is not None:
             noise = standard_normal(rng, electrons.shape)
@@ -195,8 +217,12 @@ class CameraModel:
             electrons += noise
         electrons *= np.float32(GAMMA_LUT_SIZE / self.full_well_e)
         electrons += np.float32(0.5)
+        # NaN (no light defined, e.g. outside every surface) is dark: clip keeps NaN, and casting NaN to an
+        # integer is undefined (numpy's "invalid value encountered in cast").
+        np.nan_to_num(electrons, copy=False, nan=0.0)
         np.clip(electrons, 0.0, GAMMA_LUT_SIZE, out=electrons)
-        return np.take(_gamma_lut(self.gamma), electrons.astype(np.uint16))
+        codes = electrons.astype(np.uint16)
+        return np.take(_gamma_lut(self.gamma), demosaic(codes) if colour else codes)
 
     def _gain(self, exposure: float) -> NDArray[np.float32] | float:
         """Electrons per (cd/m²) at every pixel: exposure · responsivity · vignetting · PRNU (cached)."""
@@ -208,8 +234,6 @@ class CameraModel:
             gain = gain * vignetting_gain(self.intr)
         if self.pixel_gain is not None:
             gain = gain * self.pixel_gain
-        if self.color and np.ndim(gain) == 2:
-            gain = np.asarray(gain)[..., None]
         if np.ndim(gain):
             gain = np.asarray(gain, dtype=np.float32)
         self._gain_cache = (exposure, gain)

@@ -51,6 +51,7 @@ WALL_DISTANCE_MM = 3.0
 REGISTRATION_MEAN_MM = 2.5
 REGISTRATION_P95_MM = 5.0
 LINE_BRIGHTER_GREY = 20.0         # grey levels: the projected lines on the true objects vs the wall beside them
+LINE_HUE_MARGIN = 15.0            # red minus blue level: the cable photographed red, the pipe blue
 
 
 class _Interrupt(KeyboardInterrupt):
@@ -138,20 +139,22 @@ def test_wall_pose_and_registration_against_the_site(finished_demo) -> None:
 
 
 def test_projected_map_lands_on_the_true_lines_in_the_photograph(finished_demo) -> None:
-    """Where the truth's pipe and cable are, the photograph shows the map's bright lines; beside them the wall."""
+    """Where the truth's pipe and cable are, the photograph shows the map's bright lines, in their colours (the
+    robot's cameras are colour cameras: red cable, blue pipe); beside them the wall."""
     _, out, _ = finished_demo
     cam = json.loads((out / "photo_camera.json").read_text())
     intr = Intrinsics(fx=cam["K"][0][0], fy=cam["K"][1][1], cx=cam["K"][0][2], cy=cam["K"][1][2],
                       width=cam["width"], height=cam["height"], dist=tuple(cam["dist"]))
     T_camera_from_wall = invert(np.array(cam["T_wall_from_camera"]))
     photo = cv2.imread(str(out / "photo_on_wall.png"))
-    grey = cv2.cvtColor(photo, cv2.COLOR_BGR2GRAY).astype(np.float64)  # the robot's cameras are monochrome
+    grey = cv2.cvtColor(photo, cv2.COLOR_BGR2GRAY).astype(np.float64)
+    red_minus_blue = photo[..., 2].astype(np.float64) - photo[..., 0]
 
-    def sample(points_xy: np.ndarray) -> np.ndarray:
+    def sample(points_xy: np.ndarray, image: np.ndarray = grey) -> np.ndarray:
         uv = intr.project(transform_points(T_camera_from_wall, np.column_stack([points_xy, np.zeros(len(points_xy))])))
         ok = (uv[:, 0] >= 0) & (uv[:, 0] < intr.width) & (uv[:, 1] >= 0) & (uv[:, 1] < intr.height)
         u, v = np.round(uv[ok]).astype(int).T
-        return grey[v, u]
+        return image[v, u]
 
     t = np.linspace(0.1, 0.9, 40)
     on_lines = np.concatenate([sample(np.column_stack([np.full_like(t, 0.45), 0.5 + 0.6 * t])),   # cable
@@ -160,6 +163,10 @@ def test_projected_map_lands_on_the_true_lines_in_the_photograph(finished_demo) 
                              sample(np.column_stack([0.1 + 0.25 * t, np.full_like(t, 0.60)]))])
     assert len(on_lines) > 40 and len(beside) > 20
     assert np.median(on_lines) > np.median(beside) + LINE_BRIGHTER_GREY
+    cable = sample(np.column_stack([np.full_like(t, 0.45), 0.5 + 0.6 * t]), red_minus_blue)
+    pipe = sample(np.column_stack([t, np.full_like(t, 0.85)]), red_minus_blue)
+    assert np.median(cable) > LINE_HUE_MARGIN and np.median(pipe) < -LINE_HUE_MARGIN, (np.median(cable),
+                                                                                       np.median(pipe))
 
 
 def test_resume_of_a_finished_run_keeps_every_figure(finished_demo, tmp_path: Path,

@@ -1,5 +1,6 @@
 """Bands, DIN zones, drill-point check and legend, checked against exact geometry."""
 
+import cv2
 import numpy as np
 import pytest
 
@@ -41,7 +42,7 @@ def test_band_holds_the_whole_object_plus_margin_in_95_percent_of_placements(reg
 def test_drawn_band_has_the_computed_width_and_class_colour():
     wall = _wall([CABLE])
     raster = overlays.draw_map(wall, 0.003, show_zones=False)
-    row = raster.image[int(raster.image.shape[0] / 2), :, :]
+    row = raster.image[int(raster.image.shape[0] * 0.3), :, :]  # off the middle, where its depth label is
     lit = np.flatnonzero(row[:, 3] > 0)
     width_m = (lit.max() - lit.min() + 1) / raster.px_per_m
     assert width_m == pytest.approx(2 * overlays.band_half_width_m(CABLE, 0.003), abs=2.5 / raster.px_per_m)
@@ -123,6 +124,31 @@ def test_warning_text_stays_inside_the_border_however_long(size):
     # The same frame without messages has less text: the messages were drawn, not dropped.
     assert text.sum() > 2 * (np.any(overlays.warning_frame(w, h, []) != (255, 40, 40), axis=-1)
                              & np.any(overlays.warning_frame(w, h, []) > 0, axis=-1)).sum()
+
+
+@pytest.mark.parametrize("size", [(1280, 800), (640, 400)])
+def test_map_frame_words_are_the_craftsmans_and_stay_inside_the_frame(size):
+    """Every status line the map frame can carry, at once: plain words (no device URL, ASCII), wrapped so the
+    legend box and each line's text lie inside the frame."""
+    w, h = size
+    check = overlays.check_drill_point(_wall([CABLE]), np.array([1.003, 1.0]), 0.001)
+    lines = [overlays.say_accuracy(0.0023), overlays.say_accuracy(0.012, [0, 2]), overlays.say_clipped(0.8),
+             overlays.say_zones(), overlays.say_dark_walls([1, 3]), overlays.say_drill(check)]
+    assert lines[0] == "Picture accurate to 2.3 mm." and lines[1] == "Picture accurate to 12 mm on wall 0, 2."
+    assert "keep away" in lines[-1]
+    for line in lines:
+        # OpenCV's Hershey font draws only ASCII ('±' would reach the wall as '??')
+        assert "://" not in line and line.isascii() and line[0].isupper(), line
+    layout = overlays.legend_layout((h, w, 3), lines, ("power_line",))
+    x, y, box_w, box_h = layout.box
+    assert x >= 0 and y >= 0 and x + box_w < w and y + box_h < h
+    text_x = x + int(48 * layout.scale)
+    for text, _, _ in layout.entries:
+        (tw, _), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, layout.scale, layout.thickness)
+        assert text_x + tw <= x + box_w, text
+    status = [t for t, _, swatch in layout.entries if not swatch]
+    assert " ".join(status).split() == " ".join(lines).split()  # long lines wrapped, no word dropped
+    assert [t for t, _, swatch in layout.entries if swatch] == ["power line / live"]
 
 
 def test_map_is_drawn_only_inside_the_trusted_polygon():

@@ -18,10 +18,13 @@ from scanner.wall import shipped_walls
 pytestmark = pytest.mark.gl
 
 
-def _legend_box(frame: np.ndarray, words: list[str]) -> tuple[np.ndarray, np.ndarray]:
-    """The pixels draw_legend paints for `words` (its box is opaque: the same on any map) and where."""
+def _legend_box(frame: np.ndarray, words: list[str], legend: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The pixels the legend paints for `words` where the cycle says it put it (its box is opaque: the same
+    on any map) and where."""
     sentinel = np.full_like(frame, (1, 2, 3))
-    drawn = overlays.draw_legend(sentinel.copy(), words)
+    drawn = sentinel.copy()
+    overlays.draw_layout(drawn, overlays.legend_layout(frame.shape, words, legend["classes"],
+                                                       at=tuple(legend["box"][:2])))
     return drawn, np.any(drawn != sentinel, axis=2)
 
 
@@ -37,7 +40,7 @@ def test_a_slipped_head_is_told_on_the_projected_frame(tmp_path: Path) -> None:
     assert words[0] == SAY_HEAD_SLIPPED and not any("://" in w for w in words)  # words, no URLs
     last = sorted((tmp_path / "frames").glob("frame_*.png"))[-1]
     frame = cv2.imread(str(last))[..., ::-1]
-    expected, box = _legend_box(frame, words)
+    expected, box = _legend_box(frame, words, cycle["legend"])
     assert np.array_equal(frame[box], expected[box])  # exactly these lines are drawn on the beamer's frame
-    without, box_without = _legend_box(frame, words[1:])
+    without, box_without = _legend_box(frame, words[1:], cycle["legend"])
     assert not np.array_equal(frame[box_without], without[box_without])  # and the slip's line is among them

@@ -5,10 +5,12 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
-from arproj.sim import Site
+from arproj.session.overlays import LEGEND
+from arproj.sim import Site, optics
 from arproj.sim.pictures import write_site_pictures
 from geometry.errors import InputError
 from geometry.poses import look_at, transform_points
@@ -192,3 +194,51 @@ def test_sites_dropped_without_release_free_their_gpu_objects() -> None:
         other.photograph("camera_left")                   # … are freed by the next site's drawing
         assert len(shared_context().objects) < 10         # (a few may be queued by a late cycle collection)
         other.release()
+
+
+# A projected class colour, photographed by the colour camera, keeps its hue within this (HSV hue, degrees):
+# the wall's albedo tint, the two gammas and the Bayer interpolation move it by about 10°.
+CLASS_HUE_TOLERANCE_DEG = 15.0
+
+
+def _hue_deg(rgb: np.ndarray) -> float:
+    pixel = np.clip(np.rint(rgb), 0, 255).astype(np.uint8).reshape(1, 1, 3)
+    return float(cv2.cvtColor(pixel, cv2.COLOR_RGB2HSV_FULL)[0, 0, 0]) * 360.0 / 256.0
+
+
+def _hue_gap_deg(a: float, b: float) -> float:
+    return abs((a - b + 180.0) % 360.0 - 180.0)
+
+
+def test_bayer_mosaic_keeps_each_pixels_own_channel_and_demosaicing_restores_a_flat_colour() -> None:
+    rgb = np.zeros((6, 8, 3), np.float32)
+    rgb[...] = (1.0, 2.0, 3.0)
+    mosaic = optics.bayer_mosaic(rgb)
+    assert mosaic[0, 0] == 1.0 and mosaic[0, 1] == 2.0 and mosaic[1, 0] == 2.0 and mosaic[1, 1] == 3.0  # RGGB
+    flat = np.full((16, 16, 3), (3000, 1200, 300), np.float32)
+    restored = optics.demosaic(optics.bayer_mosaic(flat).astype(np.uint16))
+    assert restored.shape == (16, 16, 3)
+    assert np.array_equal(restored[2:-2, 2:-2], np.broadcast_to(np.uint16([3000, 1200, 300]), (12, 12, 3)))
+
+
+@pytest.mark.gl
+def test_colour_camera_keeps_the_maps_colour_code(gl_context: object) -> None:
+    """Each legend colour projected as a patch is photographed (Bayer sensor with noise, demosaiced) with its
+    hue, and the nearest legend hue in the photo is its own: the photo shows the colour code."""
+    with Site.build(seed=0, ctx=gl_context, cameras={"color": True}) as site:
+        h, w = site.projector.height, site.projector.width
+        frame = np.zeros((h, w, 3), np.uint8)
+        edges = np.linspace(0, w, len(LEGEND) + 1).astype(int)
+        for k, (_, colour, _) in enumerate(LEGEND):
+            frame[h // 4:3 * h // 4, edges[k] + 20:edges[k + 1] - 20] = colour
+        lit = site.photograph("camera_left", frame).image.astype(float)
+        dark = site.photograph("camera_left").image
+        u, v = np.moveaxis(site.projector_pixels_seen("camera_left"), -1, 0)
+    legend_hues = [_hue_deg(np.array(colour, float)) for _, colour, _ in LEGEND]
+    for k, (name, _, _) in enumerate(LEGEND):
+        patch = (u > edges[k] + 40) & (u < edges[k + 1] - 40) & (v > h // 4 + 20) & (v < 3 * h // 4 - 20)
+        assert patch.sum() > 5000, name
+        hue = _hue_deg(np.median(lit[patch] - dark[patch], axis=0))
+        gaps = [_hue_gap_deg(hue, other) for other in legend_hues]
+        assert gaps[k] < CLASS_HUE_TOLERANCE_DEG, (name, hue, legend_hues[k])
+        assert int(np.argmin(gaps)) == k, (name, hue)
