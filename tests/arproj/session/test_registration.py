@@ -4,7 +4,7 @@ measurement and the laser/plane check — against exact constructions."""
 import numpy as np
 import pytest
 
-from arproj.session import registration
+from arproj.session import gate, registration
 from geometry import Intrinsics, invert, look_at, make_pose, rotation_about, transform_points
 
 PROJECTOR = Intrinsics(1664.0, 1664.0, 639.5, 639.5, 1280, 800, (0.02, -0.01, 0.0, 0.0, 0.0))
@@ -82,15 +82,20 @@ def test_a_lone_outlier_mark_is_dropped_but_a_slip_of_every_mark_is_kept(seed):
     loop = registration.measure_marks(marks, *_marks_seen(landed, 0.15, seed))
     assert loop.rejected == 1 and not loop.seen[11] and loop.seen.sum() == len(marks) - 1
     assert loop.errors_m.max() < 0.0015 and "1 lone outlier" in loop.summary()
-    # a slipped head: every mark moves together (6 mm and 0.3° about the pattern's centre), none is dropped,
-    # the worst stays in the evidence the gate judges
+    fine = gate.RegistrationEvidence(pose_sigma_m=0.0008, closed_loop_errors_m=loop.errors_m,
+                                     closed_loop_expected=len(marks), stereo_residual_px=loop.residual_px)
+    assert gate.decide(fine).show_map
+    # a slipped head: every mark moves together (11 mm and 0.3° about the pattern's centre), none is dropped,
+    # the worst stays in the evidence and the gate warns
     c, s = np.cos(np.radians(0.3)), np.sin(np.radians(0.3))
     centre = marks.mean(axis=0)
-    slipped = (marks - centre) @ np.array([[c, -s], [s, c]]).T + centre + [0.006, -0.002]
+    slipped = (marks - centre) @ np.array([[c, -s], [s, c]]).T + centre + [0.011, -0.002]
     loop = registration.measure_marks(marks, *_marks_seen(slipped, 0.15, seed))
     truth = np.linalg.norm(slipped - marks, axis=1)
     assert loop.rejected == 0 and loop.seen.all()
     assert loop.errors_m.max() == pytest.approx(truth.max(), abs=0.0015)
+    fine.closed_loop_errors_m = loop.errors_m
+    assert not gate.decide(fine).show_map
 
 
 def test_laser_plane_offset_sees_a_wrong_camera_mount():
