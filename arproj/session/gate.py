@@ -25,7 +25,8 @@ from scipy.spatial import cKDTree
 from arproj.session import tolerances as tol
 
 HEAD_COMMAND_TOLERANCE_DEG = 0.05
-ROBOT_MOTION_TOLERANCE_M = 0.003   # at the wall: translation plus heading change × distance
+ROBOT_MOTION_TOLERANCE_M = 0.003   # at the wall: translation plus heading change × distance, once significant
+ROBOT_MOTION_CHI2 = 16.27          # χ² (3 dof, 99.9 %) of the scan match's (dx, dy, dθ) beyond its own noise
 STEREO_RESIDUAL_MAX_PX = 1.0       # reprojection residual of triangulated check marks (root median square)
 MIN_VISIBLE_FRACTION = 0.3         # fewer check marks seen than this fraction: pattern lost
 LASER_PLANE_TOLERANCE_M = 0.006    # laser and cameras disagree about the wall by more: wrong rig / moved camera
@@ -45,6 +46,7 @@ class RegistrationEvidence:
     closed_loop_expected: int = 0
     stereo_residual_px: float | None = None
     robot_motion_m: float = 0.0
+    robot_motion_significant: bool = True  # beyond the scan match's own noise (ScanMotion.significant); unknown: yes
     laser_plane_offset_m: float | None = None  # laser returns vs the camera-measured wall (rig/mount check)
     head_failure: str | None = None
     notes: list[str] = field(default_factory=list)
@@ -90,7 +92,7 @@ def decide(ev: RegistrationEvidence, tolerance_m: float = tol.REGISTRATION_TOLER
         fail(f"head not answering: {ev.head_failure.split(' — ')[0]}", SAY_HEAD_SILENT)
     if ev.head_command_error_deg > HEAD_COMMAND_TOLERANCE_DEG:
         fail(f"head not where commanded ({ev.head_command_error_deg:.2f}° off)", SAY_HEAD_MOVED)
-    if ev.robot_motion_m > ROBOT_MOTION_TOLERANCE_M:
+    if robot_moved(ev):
         fail(f"robot moved {ev.robot_motion_m * 1000:.0f} mm since the wall pose was estimated", SAY_ROBOT_MOVED)
     sigma = ev.pose_sigma_m if ev.pose_sigma_m is not None else np.inf
     loop_max = 0.0
@@ -124,13 +126,28 @@ def decide(ev: RegistrationEvidence, tolerance_m: float = tol.REGISTRATION_TOLER
 @dataclass
 class ScanMotion:
     """Motion of the robot between two 2D scans: the current scan's points map onto the reference by
-    (dx, dy, dtheta); rms_m the point-to-line residual; n pairs used."""
+    (dx, dy, dtheta); rms_m the point-to-line residual; n pairs used; cov the (3, 3) covariance of
+    (dx, dy, dtheta) from the match itself, σ² (JᵀJ)⁻¹ with σ the residual: what the scans' noise leaves."""
 
     dx: float
     dy: float
     dtheta_rad: float
     rms_m: float
     n: int
+    cov: NDArray[np.float64] = field(default_factory=lambda: np.full((3, 3), np.nan))
+
+    @property
+    def significant(self) -> bool:
+        """The motion is more than the scans' noise explains (χ² test on (dx, dy, dθ) with cov); an unmatched
+        scan (n = 0) counts as moved: nothing says it did not."""
+        if not self.n:
+            return True
+        x = np.array([self.dx, self.dy, self.dtheta_rad])
+        try:
+            chi2 = float(x @ np.linalg.solve(self.cov, x))
+        except np.linalg.LinAlgError:
+            return True
+        return not np.isfinite(chi2) or chi2 > ROBOT_MOTION_CHI2
 
     def displacement_at(self, distance_m: float) -> float:
         """Worst displacement (metres) of a point distance_m away caused by this motion."""
@@ -147,12 +164,16 @@ def scan_motion(reference_xy: NDArray[np.float64], current_xy: NDArray[np.float6
         return ScanMotion(np.nan, np.nan, np.nan, np.nan, 0)
     tree = cKDTree(ref)
     _, nbr = tree.query(ref, k=SCAN_MATCH_NEIGHBOURS)
-    local = ref[nbr] - ref[nbr].mean(axis=1, keepdims=True)
+    # each reference point stands for the line through its neighbours: measured from their centroid, a residual
+    # is not shrunk by picking the nearest noisy point (which made σ² (JᵀJ)⁻¹ half the true spread)
+    centroid = ref[nbr].mean(axis=1)
+    local = ref[nbr] - centroid[:, None, :]
     cov = np.einsum("nki,nkj->nij", local, local)
     _, vecs = np.linalg.eigh(cov)
     normals = vecs[:, :, 0]  # smallest eigenvalue: across the wall
     theta, t = 0.0, np.zeros(2)
     rms, n = np.nan, 0
+    cov = np.full((3, 3), np.nan)
     for _ in range(SCAN_MATCH_ITERATIONS):
         c, s = np.cos(theta), np.sin(theta)
         moved = cur @ np.array([[c, -s], [s, c]]).T + t
@@ -162,7 +183,7 @@ def scan_motion(reference_xy: NDArray[np.float64], current_xy: NDArray[np.float6
             break
         nrm = normals[idx[keep]]
         p = moved[keep]
-        r = np.einsum("ij,ij->i", p - ref[idx[keep]], nrm)
+        r = np.einsum("ij,ij->i", p - centroid[idx[keep]], nrm)
         # robust: drop pairs far beyond the typical residual (outlier beams)
         mad = np.median(np.abs(r)) * 1.4826 + 1e-6
         ok = np.abs(r) < 4 * mad + 0.005
@@ -171,7 +192,20 @@ def scan_motion(reference_xy: NDArray[np.float64], current_xy: NDArray[np.float6
         t = t + step[:2]
         theta += step[2]
         rms, n = float(np.sqrt(np.mean(r[ok] ** 2))), int(ok.sum())
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r_after = r[ok] + J @ step
+            # σ² = the residual's variance: the current point's noise plus its line's (σ²/K for K neighbours).
+            # The reference scan is as noisy as the current one and moves the match as much: its noise counts
+            # twice, σ_point² (JᵀJ)⁻¹ · 2 = σ² (JᵀJ)⁻¹ · 2K / (K + 1)
+            both_scans = 2 * SCAN_MATCH_NEIGHBOURS / (SCAN_MATCH_NEIGHBOURS + 1)
+            cov = both_scans * float(r_after @ r_after) / max(n - 3, 1) * np.linalg.pinv(J.T @ J)
         if np.linalg.norm(step) < 1e-7:
             break
     # the current scan maps onto the reference by (theta, t): that is the robot's motion seen from the old pose
-    return ScanMotion(float(t[0]), float(t[1]), float(theta), rms, n)
+    return ScanMotion(float(t[0]), float(t[1]), float(theta), rms, n, cov)
+
+
+def robot_moved(ev: RegistrationEvidence) -> bool:
+    """The one test of "the robot moved": the laser's motion matters at the wall and is more than the scan
+    match's own noise. Used by decide() and by the session's re-estimate trigger alike."""
+    return ev.robot_motion_m > ROBOT_MOTION_TOLERANCE_M and ev.robot_motion_significant

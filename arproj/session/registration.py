@@ -253,13 +253,15 @@ def find_marks(image: NDArray[np.uint8], predicted_uv: NDArray[np.float64],
 class ClosedLoopResult:
     """errors_xy: (k, 2) metres, where each used mark landed minus where it should (wall x, y); seen: (n,)
     marks found in both cameras and kept; offset_xy: mean error (the correction applied when small);
-    residual_px: stereo residual (root median square); off_plane_m: median left/right disagreement on the wall."""
+    residual_px: stereo residual (root median square); off_plane_m: median left/right disagreement on the wall;
+    rejected: marks found in both cameras but dropped as lone outliers of the error field (not in seen)."""
 
     marks_xy: NDArray[np.float64]
     errors_xy: NDArray[np.float64]
     seen: NDArray[np.bool_]
     residual_px: float
     off_plane_m: float
+    rejected: int = 0
 
     @property
     def errors_m(self) -> NDArray[np.float64]:
@@ -273,8 +275,10 @@ class ClosedLoopResult:
         if not len(self.errors_xy):
             return f"closed loop: 0 of {len(self.seen)} check marks seen"
         e = self.errors_m * 1000
+        dropped = f", {self.rejected} lone outlier mark(s) dropped (mis-detected or off the wall)" \
+            if self.rejected else ""
         return (f"closed loop: {self.seen.sum()} of {len(self.seen)} marks, error mean {e.mean():.2f} mm, "
-                f"p95 {np.percentile(e, 95):.2f} mm, stereo residual {self.residual_px:.2f} px")
+                f"p95 {np.percentile(e, 95):.2f} mm, stereo residual {self.residual_px:.2f} px{dropped}")
 
 
 def predict_camera_pixels(marks_xy: NDArray[np.float64], T_wall_from_robot: NDArray[np.float64],
@@ -289,6 +293,40 @@ def predict_camera_pixels(marks_xy: NDArray[np.float64], T_wall_from_robot: NDAr
 
 MARK_MAX_RESIDUAL_PX = 1.0      # a mark whose two views do not meet within this was mis-detected
 MARK_MAX_DISAGREEMENT_M = 0.004  # … or whose left and right landing points differ by more
+MARK_OUTLIER_SIGMAS = 4.0        # a mark this many σ off the smooth (affine) error field of the others is alone …
+MARK_OUTLIER_MAX_SHARE = 0.25    # … but no more than this share of the marks is ever dropped so
+MARK_NOISE_FLOOR_PX = 0.05      # a mark's centre is not found finer than this (its noise σ, at least)
+RAYLEIGH_MEDIAN = float(np.sqrt(2 * np.log(2)))  # median of a 2D error's length, in σ per axis
+
+
+def lone_outliers(marks_xy: NDArray[np.float64], errors_xy: NDArray[np.float64], noise_sigma_m: float
+                  ) -> NDArray[np.bool_]:
+    """Marks whose error stands alone: beyond MARK_OUTLIER_SIGMAS σ of an affine error field fitted robustly to
+    all marks (σ: the residuals' robust spread, at least noise_sigma_m, the marks' own measurement noise).
+
+    Whatever moves the projection on the wall — a slipped head, a moved projector, a wrong pose — moves every
+    mark together, smoothly over the wall: the affine field takes it up and no mark is dropped. A mark a
+    sunlight patch made the finder mistake, or one landing on a board in front of the wall, is off alone.
+    At most MARK_OUTLIER_MAX_SHARE of the marks (the worst) are dropped; with too few marks to tell, none."""
+    n = len(errors_xy)
+    out = np.zeros(n, dtype=bool)
+    if n < 2 * tol.CLOSED_LOOP_MIN_FEATURES:
+        return out
+    A = np.column_stack([marks_xy, np.ones(n)])
+
+    def refit(keep: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        field_ = np.asarray(np.linalg.lstsq(A[keep], errors_xy[keep], rcond=None)[0], dtype=np.float64)
+        r = np.linalg.norm(errors_xy - A @ field_, axis=1)
+        sigma = max(float(np.median(r[keep])) / RAYLEIGH_MEDIAN, noise_sigma_m)
+        return field_, r <= MARK_OUTLIER_SIGMAS * sigma
+
+    field_, keep = refine(np.ones(n, dtype=bool), refit, rounds=3, min_inliers=2 * tol.CLOSED_LOOP_MIN_FEATURES)
+    if field_ is None:
+        return out
+    r = np.linalg.norm(errors_xy - A @ field_, axis=1)
+    worst = np.argsort(-r)[:int(MARK_OUTLIER_MAX_SHARE * n)]
+    out[worst] = ~keep[worst]
+    return out
 
 
 def _ray_plane_xy(camera: Intrinsics, uv: NDArray[np.float64], T_wall_from_camera: NDArray[np.float64]
@@ -325,12 +363,19 @@ def measure_marks(marks_xy: NDArray[np.float64], uv_left: NDArray[np.float64], u
         & (disagreement <= MARK_MAX_DISAGREEMENT_M) & np.all(np.isfinite(xy_l + xy_r), axis=1)
     if rms > gate.STEREO_RESIDUAL_MAX_PX:
         good[:] = True  # the rig itself is in doubt: keep everything, the gate will say so
+    off_plane = float(np.median(disagreement[good])) if good.any() else float("nan")
     kept = np.flatnonzero(seen)[good]
+    errors = 0.5 * (xy_l[good] + xy_r[good]) - marks_xy[kept]
+    rejected = 0
+    if rms <= gate.STEREO_RESIDUAL_MAX_PX and np.isfinite(off_plane):
+        # each camera's landing point has the noise σ_d/√2 of their disagreement d (per axis), their mean half σ_d;
+        # never below the finder's sub-pixel limit, as a length at the wall (noise-free images: round-off)
+        floor = MARK_NOISE_FLOOR_PX * abs(float(T_wall_from_camera_left[2, 3])) / camera_left.fx
+        alone = lone_outliers(marks_xy[kept], errors, max(off_plane / RAYLEIGH_MEDIAN / 2, floor))
+        kept, errors, rejected = kept[~alone], errors[~alone], int(alone.sum())
     used = np.zeros(len(marks_xy), dtype=bool)
     used[kept] = True
-    errors = 0.5 * (xy_l[good] + xy_r[good]) - marks_xy[kept]
-    off_plane = float(np.median(disagreement[good])) if good.any() else float("nan")
-    return ClosedLoopResult(marks_xy, errors, used, rms, off_plane)
+    return ClosedLoopResult(marks_xy, errors, used, rms, off_plane, rejected)
 
 
 LASER_NEAR_WALL_M = 0.08     # laser returns this close to the estimated wall plane belong to it

@@ -350,6 +350,7 @@ class ProjectionSession:
             if current is not None:
                 motion = gate.scan_motion(reg.reference_scan[:, :2], current[:, :2])
                 ev.robot_motion_m = motion.displacement_at(reg.distance_m) if motion.n else np.inf
+                ev.robot_motion_significant = motion.significant
         ev.laser_plane_offset_m = reg.laser_plane_offset_m
         if reg.loop is not None:
             ev.closed_loop_expected = len(reg.loop.seen)
@@ -404,8 +405,7 @@ class ProjectionSession:
         needs_estimate = force or self.registration is None
         if not needs_estimate:
             ev = self.evidence()
-            needs_estimate = ev.head_command_error_deg > HEAD_MOVED_DEG or \
-                ev.robot_motion_m > gate.ROBOT_MOTION_TOLERANCE_M
+            needs_estimate = ev.head_command_error_deg > HEAD_MOVED_DEG or gate.robot_moved(ev)
             if needs_estimate:
                 self.log.append("head or robot moved: re-estimating the wall pose")
         if needs_estimate:

@@ -75,6 +75,29 @@ def test_scan_matching_measures_the_robots_motion(move):
     assert np.degrees(m.dtheta_rad) == pytest.approx(move[2], abs=0.09)
 
 
+def test_robot_motion_is_judged_against_the_scan_matchs_own_noise():
+    start = np.array([2.0, 1.5])
+    false_moves = 0
+    for seed in range(20):
+        rng = np.random.default_rng(100 + seed)
+        ref = _scan(start, 0.0, rng)
+        still = gate.scan_motion(ref, _scan(start, 0.0, rng))
+        # its covariance describes its error: σ of x (the wall ahead only) ~0.9 mm, y ~0.6 mm (60 seeds)
+        assert 0.0003 < np.sqrt(still.cov[0, 0]) < 0.003 and 0.0002 < np.sqrt(still.cov[1, 1]) < 0.002
+        false_moves += still.significant
+        moved = gate.scan_motion(ref, _scan(start + np.array([0.0, 0.006]), 0.0, rng))
+        assert moved.significant  # 6 mm: ten σ
+    assert false_moves <= 1  # χ² at 99.9 %: none expected in 20
+    # the one test decide() and the session's re-estimate share: beyond the noise and mattering at the wall
+    assert gate.robot_moved(gate.RegistrationEvidence(robot_motion_m=0.004, robot_motion_significant=True))
+    assert not gate.robot_moved(gate.RegistrationEvidence(robot_motion_m=0.004, robot_motion_significant=False))
+    assert not gate.robot_moved(gate.RegistrationEvidence(robot_motion_m=0.002, robot_motion_significant=True))
+    noise = _good(robot_motion_m=0.0035, robot_motion_significant=False)
+    assert not any("robot moved" in r for r in gate.decide(noise).reasons)
+    assert not gate.decide(_good(robot_motion_m=0.0035)).show_map  # unknown significance: moved
+    assert gate.ScanMotion(np.nan, np.nan, np.nan, np.nan, 0).significant  # no match: nothing says it stayed
+
+
 def test_the_shown_region_shrinks_with_what_the_loop_measures_and_never_grows():
     from arproj.session import registration
 

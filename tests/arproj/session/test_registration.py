@@ -4,7 +4,7 @@ measurement and the laser/plane check — against exact constructions."""
 import numpy as np
 import pytest
 
-from arproj.session import registration
+from arproj.session import gate, registration
 from geometry import Intrinsics, invert, look_at, make_pose, rotation_about, transform_points
 
 PROJECTOR = Intrinsics(1664.0, 1664.0, 639.5, 639.5, 1280, 800, (0.02, -0.01, 0.0, 0.0, 0.0))
@@ -58,6 +58,44 @@ def test_closed_loop_measures_a_known_offset_exactly():
     uv_r[3] += [6.0, -4.0]  # one mis-detected mark is dropped, not averaged in
     loop = registration.measure_marks(marks, uv_l, uv_r, cam, cam, T_right_from_left, T_wall_from_left)
     assert loop.seen.sum() == len(marks) - 1 and np.allclose(loop.offset_xy, offset, atol=1e-7)
+
+
+def _marks_seen(landed_xy, noise_px, seed):
+    cam = Intrinsics.from_fov(1280, 800, 70.0, dist=(-0.1, 0.05, 0.0, 0.0, 0.0))
+    T_wall_from_left = look_at([1.4, 1.2, 2.0], [1.5, 1.2, 0.0], up=[0, 1, 0])
+    T_left_from_right = make_pose(rotation_about([0, 1, 0], np.radians(-0.5)), [0.2, 0.0, 0.0])
+    landed = np.column_stack([landed_xy, np.zeros(len(landed_xy))])
+    rng = np.random.default_rng(seed)
+    uv_l = cam.project(transform_points(invert(T_wall_from_left), landed))
+    uv_r = cam.project(transform_points(invert(T_wall_from_left @ T_left_from_right), landed))
+    uv_l, uv_r = (uv + rng.normal(0, noise_px, uv.shape) for uv in (uv_l, uv_r))
+    return uv_l, uv_r, cam, cam, invert(T_left_from_right), T_wall_from_left
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_lone_outlier_mark_is_dropped_but_a_slip_of_every_mark_is_kept(seed):
+    marks = np.array([[x, y] for x in np.linspace(1.0, 2.0, 6) for y in np.linspace(0.8, 1.6, 5)])
+    # a mark on a board in front of the wall (or a sunlight patch the finder took): 5 mm off alone,
+    # seen alike by both cameras so the stereo checks pass it; 0.15 px detection noise (~0.3 mm here)
+    landed = marks.copy()
+    landed[11] += [0.004, 0.003]
+    loop = registration.measure_marks(marks, *_marks_seen(landed, 0.15, seed))
+    assert loop.rejected == 1 and not loop.seen[11] and loop.seen.sum() == len(marks) - 1
+    assert loop.errors_m.max() < 0.0015 and "1 lone outlier" in loop.summary()
+    fine = gate.RegistrationEvidence(pose_sigma_m=0.0008, closed_loop_errors_m=loop.errors_m,
+                                     closed_loop_expected=len(marks), stereo_residual_px=loop.residual_px)
+    assert gate.decide(fine).show_map
+    # a slipped head: every mark moves together (11 mm and 0.3° about the pattern's centre), none is dropped,
+    # the worst stays in the evidence and the gate warns
+    c, s = np.cos(np.radians(0.3)), np.sin(np.radians(0.3))
+    centre = marks.mean(axis=0)
+    slipped = (marks - centre) @ np.array([[c, -s], [s, c]]).T + centre + [0.011, -0.002]
+    loop = registration.measure_marks(marks, *_marks_seen(slipped, 0.15, seed))
+    truth = np.linalg.norm(slipped - marks, axis=1)
+    assert loop.rejected == 0 and loop.seen.all()
+    assert loop.errors_m.max() == pytest.approx(truth.max(), abs=0.0015)
+    fine.closed_loop_errors_m = loop.errors_m
+    assert not gate.decide(fine).show_map
 
 
 def test_laser_plane_offset_sees_a_wrong_camera_mount():
