@@ -22,6 +22,7 @@ import io
 import json
 import math
 import reprlib
+import tokenize
 import zipfile
 import zlib
 from collections.abc import Iterator, Sequence
@@ -357,7 +358,9 @@ class NpzFile:
             return np.lib.format.read_array(io.BytesIO(data), allow_pickle=False)
         except InputError:
             raise
-        except (ValueError, OSError, EOFError, zipfile.BadZipFile, KeyError, RuntimeError, zlib.error) as err:
+        # a damaged header reaches numpy's parser: literal_eval's SyntaxError, then its tokenizer's TokenError
+        except (ValueError, OSError, EOFError, zipfile.BadZipFile, KeyError, RuntimeError, zlib.error, SyntaxError,
+                tokenize.TokenError) as err:
             raise InputError(f"{where} cannot be read ({_reason(err)}): a damaged {self.what}", self.hint) from None
 
     def floats(self, name: str, shape: Sequence[int | None], finite: bool = True) -> NDArray[np.float64]:

@@ -88,3 +88,16 @@ def test_npz_headers_are_checked_before_the_data_are_read(tmp_path) -> None:
     path.write_bytes(path.read_bytes()[:-30])
     with pytest.raises(InputError, match=r"not an \.npz test file"):
         inputs.NpzFile(path, "test file")
+
+
+@pytest.mark.parametrize("broken", [b"(3, 75, 88l, }", b"(3, 75, 88}, }", b"(3, 75 88), }"])
+def test_a_damaged_npy_header_is_refused_by_name(tmp_path, broken: bytes) -> None:
+    # one flipped byte in a shape makes numpy's header parser raise SyntaxError or tokenize's TokenError
+    buffer = io.BytesIO()
+    np.lib.format.write_array(buffer, np.zeros((3, 75, 88), np.uint8))
+    data = buffer.getvalue().replace(b"(3, 75, 88), }", broken)
+    path = tmp_path / "coverage.npz"
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("covered.npy", data)
+    with inputs.NpzFile(path, "coverage layer") as npz, pytest.raises(InputError, match="'covered' cannot be read"):
+        npz.array("covered", kinds="ub")
