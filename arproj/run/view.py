@@ -54,16 +54,23 @@ def check_target(view: str) -> None:
         raise InputError(f"--view {view}: no folder {path.parent}", "create it first")
 
 
+def open_recording(view: str, application_id: str) -> rr.RecordingStream:
+    """A Rerun recording for `--view` (checked first): a spawned live viewer for "live", else saved to that
+    .rrd file."""
+    check_target(view)
+    rec = rr.RecordingStream(application_id)
+    if view == LIVE:
+        rec.spawn()
+    else:
+        rec.save(view)
+    return rec
+
+
 class ScanView:
     """A scanner.run.ScanWatcher that streams the scan to Rerun."""
 
     def __init__(self, view: str, wall_width_m: float, wall_height_m: float, resolution_m: float = 0.005) -> None:
-        check_target(view)
-        self.rec = rr.RecordingStream("arproj_scan")
-        if view == LIVE:
-            self.rec.spawn()
-        else:
-            self.rec.save(view)
+        self.rec = open_recording(view, "arproj_scan")
         self.info = GridInfo.covering(0.0, 0.0, wall_width_m, wall_height_m, resolution_m)
         self.top = self.info.origin_y + self.info.height * self.info.resolution
         self.sums = {c: np.zeros(self.info.shape) for c in CHANNEL_NAMES}
@@ -244,13 +251,8 @@ class SessionView:
     cameras' last captures (cameras/left, cameras/right) and the gate's state (gate, a text log)."""
 
     def __init__(self, view: str, captures: Any) -> None:
-        check_target(view)
         self.captures = captures
-        self.rec = rr.RecordingStream("arproj_project")
-        if view == LIVE:
-            self.rec.spawn()
-        else:
-            self.rec.save(view)
+        self.rec = open_recording(view, "arproj_project")
         self.cycles = 0
 
     def cycle(self, session: Any, decision: Any) -> None:
@@ -292,12 +294,7 @@ class CalibrationView:
     looked."""
 
     def __init__(self, view: str) -> None:
-        check_target(view)
-        self.rec = rr.RecordingStream("arproj_calibrate")
-        if view == LIVE:
-            self.rec.spawn()
-        else:
-            self.rec.save(view)
+        self.rec = open_recording(view, "arproj_calibrate")
         self.captures = 0
         self.corners: dict[str, list[NDArray[np.float64]]] = {"left": [], "right": []}
 
