@@ -349,11 +349,13 @@ class RoomSession:
             T_room_from_robot = self.walls[0].T_room_from_wall @ self.robot.wall_prior()[0]
         return T_room_from_robot @ self.session.T_robot_from_projector_model(self.session.head_deg())
 
-    def choose_anchor(self) -> int:
-        """The wall the beam falls on most by the predicted pose; the current anchor kept on a tie."""
+    def anchor_order(self) -> list[int]:
+        """The walls in the beam by the predicted pose, the one it falls on most first (the current anchor
+        first on a tie); the current anchor alone when the beam meets no wall."""
         share = beam_share(self.walls, self.predicted_T_room_from_projector(), self.projector_intr)
-        best = int(np.argmax(share))
-        return self.anchor if share[self.anchor] >= share[best] else best
+        order = sorted((k for k in range(len(self.walls)) if share[k] > 0),
+                       key=lambda k: (-share[k], k != self.anchor))
+        return order or [self.anchor]
 
     def aim_at(self, k: int, wall_xy: tuple[float, float]) -> tuple[float, float]:
         """Turn the head so the beam's centre lands on point (x, y) m of walls[k] (the robot's prior carried
@@ -364,13 +366,18 @@ class RoomSession:
         """One cycle: hand over to the wall the beam falls on most, its session's update, then each other wall
         in view its closed loop and gate; the frame draws each wall whose gate is open, on its own map; a
         warning when none is."""
-        anchor = self.choose_anchor()
-        if anchor != self.anchor:
-            self.log.append(f"handover: the beam moved from wall {self.walls[self.anchor].index} to wall "
-                            f"{self.walls[anchor].index}; registering on it")
-            self.anchor, self.session = anchor, self._session_on(anchor)
-        first = self.session.update(show=False)
+        for tried, anchor in enumerate(self.anchor_order()):  # the next wall when the pattern measured no pose
+            if anchor != self.anchor:
+                why = "the beam falls on it most" if not tried else \
+                    f"wall {self.walls[self.anchor].index}'s pattern gave no wall pose"
+                self.log.append(f"handover: registering on wall {self.walls[anchor].index} (was wall "
+                                f"{self.walls[self.anchor].index}): {why}")
+                self.anchor, self.session = anchor, self._session_on(anchor)
+            first = self.session.update(show=False)
+            if self.session.registration is not None:
+                break
         reg = self.session.registration
+        anchor = self.anchor
         verdicts: dict[int, WallVerdict] = {}
         T_room_from_projector = self.T_room_from_projector
         if reg is not None and T_room_from_projector is not None:

@@ -198,7 +198,7 @@ def test_turning_the_head_across_the_corner_hands_over_and_each_wall_is_drawn_on
                     assert not lit[(which == 1) & off_line].any() and lit[which == 0].any()
                     assert any("Wall 1" in line and "dark" in line for line in rs.last_words)
                     site.remove_targets()
-            assert rs.log == ["handover: the beam moved from wall 0 to wall 1; registering on it"]
+            assert rs.log == ["handover: registering on wall 1 (was wall 0): the beam falls on it most"]
     finally:
         robot.close()
         site.release()
