@@ -1,16 +1,21 @@
-"""Several walls in one site frame: one beamer frame over an inside corner, each wall drawn with its own map.
+"""Several walls in one site frame: one beamer frame over an inside corner, each wall drawn with its own map,
+handed over from wall to wall as the head turns.
 
-The session registers on the first wall as ever (pattern, wall pose, closed loop, gate): the wall pose puts the
-robot in the room, so the projector's pose is known against every wall of the site's room. Each other wall in
-the beam gets its own closed loop (check marks on it, photographed, each camera's ray met with that wall's
-plane), its own small in-plane correction and its own gate. The frame is the walls' map meshes drawn in the
-room frame, each textured by its own wall's raster: a ray from the projector meets the nearest mesh (the
-depth test splits the image by wall), and where no wall's map is — or a wall's gate is closed — nothing is
-drawn: dark, unknown, never another wall's colours.
+Each update the session predicts from the head's reported angles (head model, the robot's last registered
+place in the room) where the beam falls, and registers on the wall it falls on most — the anchor — as ever
+(pattern, wall pose, closed loop, gate), in that wall's own ProjectionSession with the robot's prior carried to
+that wall through the room; when that wall's pattern gives no pose, on the next wall in the beam. The wall
+pose puts the robot in the room, so the projector's pose is known against every wall of the site's room. Each
+other wall in the beam gets its own closed loop (check marks on it, photographed, each camera's ray met with
+that wall's plane), its own small in-plane correction and its own gate; a wall out of the beam gets no
+verdict. The frame is the walls' map meshes drawn in the room frame, each textured by its own wall's raster:
+a ray from the projector meets the nearest mesh (the depth test splits the image by wall), and where no
+wall's map is — or a wall's gate is closed — nothing is drawn: dark, unknown, never another wall's colours.
 
-    walls = [RoomWall.of(0, map0, T_room_from_wall0, (w0, h0)), RoomWall.of(1, map1, T_room_from_wall1, (w1, h1))]
-    with RoomSession(rig, walls, robot) as s:
-        verdicts = s.update()          # {wall index: WallVerdict}
+    walls = [RoomWall(0, map0, T_room_from_wall0, (w0, h0)), RoomWall(1, map1, T_room_from_wall1, (w1, h1))]
+    with RoomSession(rig, walls, robot) as s:     # the robot's wall prior in walls[0]'s frame
+        s.aim_at(1, (0.4, 1.2))                   # the beam's centre on wall 1's point (0.4, 1.2) m
+        verdicts = s.update()                     # {position in walls: WallVerdict}; s.anchor registered on
 
 The walls' maps may come from one measured room mesh (room.glb, mapping.exports.glb.write_room_glb): each
 wall's faces with its own map, the faces on no mapped wall (floor, ceiling, clutter) drawn black, so they hide
