@@ -5,11 +5,15 @@ finished ones, so `--resume` skips them and an interrupted run loses nothing):
 
     scan         adaptive scan of the wall file's wall (scanner, serial device simulators) → scan.db
     map          scan log → stitched frames → grids → objects (mapping) → map/ (map.png, signals.png, …)
-    mesh         range images of the simulated site → measured wall surface → textured map/wall.glb
+    mesh         range images of the simulated site → measured wall surface → textured map/wall.glb, and (the
+                 range images looking into the room corner too) map/room.glb: the mapped wall, the side wall and
+                 the floor in one room frame, all but the mapped wall dark
     calibrate    the calibration wizard's simulated procedure → rig/ (rig.yaml, camera_info files)
     wall pose    projected pattern, both cameras → wall plane and projector pose (wallpose)
     pre-warp     the projection session's frame: the map pre-warped for the beamer, closed loop, safety gate
     photograph   the simulated camera photographs the wall with that frame projected on it (paper fig. 16)
+    room         the room session on map/room.glb, the head turned to the room corner: the beam on the mapped
+                 wall and the side wall, the mapped wall shown, the side wall (no map) left dark
 
 Every figure compares with the simulated truth: the wall file (objects), the site (wall plane, projector pose,
 where each projector pixel really lands). A stage that fails (a part not usable yet) is reported with its
@@ -53,6 +57,8 @@ RANGE_VIEW_DISTANCE_M = 1.5    # range camera in front of the wall: its noise gr
 RANGE_FOOTPRINT_PER_M = (1.11, 0.83)  # the default site's range camera (58° × 45°) sees this much per metre
 RANGE_BLOCK_PX = 4             # range images are reduced to the median of 4 × 4 pixel blocks
 RANGE_VIEW_OVERLAP = 0.2       # views overlap by this fraction, so the merged mesh has no gaps
+CORNER_VIEW_M = (0.9, 1.0)     # range views into the room corner at the wall's x = 0: eye this far along, out
+CORNER_AIM_X_M = 0.35          # the room stage aims the beam's centre this far from that corner, on the wall
 CALIBRATED_RIG = "calibrated (rig/)"
 DESIGN_RIG = "design values (uncalibrated)"
 TRUTH_STEP_M = 0.01            # truth polylines drawn into the photograph at 1 cm steps
@@ -279,9 +285,10 @@ def map_against_truth(ctx: DemoContext, objects: list[Any]) -> None:
 
 def stage_mesh(ctx: DemoContext) -> None:
     """Range images of the wall → merged surface mesh in the wall frame → textured wall.glb (and a view of it)."""
+    from arproj.cli.map import write_room_map
     from arproj.session.wallmap import load_wall_map
-    from mapping.exports.glb import write_wall_glb
-    from mapping.surface import split_wall_faces, wall_mesh_from_range_images
+    from mapping.exports.glb import ROOM_FILE_NAME, write_wall_glb
+    from mapping.surface import merged_range_mesh, other_walls_in_mesh, split_wall_faces, wall_mesh_from_range_images
     from render import MeshRenderer
 
     _, result = ctx.map_data()
@@ -295,10 +302,19 @@ def stage_mesh(ctx: DemoContext) -> None:
         depth, intr = _block_median(np.asarray(image.depth, dtype=np.float64), image.intr, RANGE_BLOCK_PX)
         views.append((depth, intr, T_room_from_cam))
         arrays |= {f"depth_{k}": depth, f"K_{k}": intr.K, f"T_world_from_camera_{k}": T_room_from_cam}
+    for y in (0.3 * ctx.wall.height_m, 0.7 * ctx.wall.height_m):  # into the corner: the side wall beside it
+        k = len(views)
+        eye, target = transform_points(T_room_from_wall, [[CORNER_VIEW_M[0], y, CORNER_VIEW_M[1]], [0.0, y, 0.2]])
+        T_room_from_cam = look_at(eye, target, up=[0.0, 0.0, 1.0])
+        image = site.range_image(T_room_from_cam)
+        depth, intr = _block_median(np.asarray(image.depth, dtype=np.float64), image.intr, RANGE_BLOCK_PX)
+        views.append((depth, intr, T_room_from_cam))
+        arrays |= {f"depth_{k}": depth, f"K_{k}": intr.K, f"T_world_from_camera_{k}": T_room_from_cam}
     np.savez_compressed(ctx.out / "map" / "range_images.npz", T_world_from_wall=T_room_from_wall, **arrays)
     with warnings.catch_warnings():  # all-NaN pixel blocks (no return) are expected at the views' edges
         warnings.simplefilter("ignore", RuntimeWarning)
-        mesh = wall_mesh_from_range_images(views, result.bounds, T_room_from_wall)
+        merged = merged_range_mesh(views)
+        mesh = wall_mesh_from_range_images(views, result.bounds, T_room_from_wall, merged=merged)
     # The crop to the mapped area is in x, y only: the floor in front of the wall's foot comes along. wall.glb
     # keeps it as a dark, untextured surface (no map: unknown); only the wall's faces carry the map.
     wall_faces, other = split_wall_faces(mesh)
@@ -312,6 +328,17 @@ def stage_mesh(ctx: DemoContext) -> None:
                            "surface p95 off the true wall mm": float(1000 * np.percentile(off_plane, 95)),
                            "surface RMS off the true wall mm": float(1000 * np.sqrt(np.mean(off_plane ** 2))),
                            "surface max off the true wall mm": float(1000 * off_plane.max())}
+    # room.glb when the range images see another wall (the corner views): what the room stage projects
+    others = other_walls_in_mesh(merged, T_room_from_wall, views[0][2][:3, 3])
+    (ctx.out / "map" / ROOM_FILE_NAME).unlink(missing_ok=True)  # an earlier run's
+    if others:
+        from arproj.session.room import load_room_map
+
+        room = load_room_map(write_room_map(ctx.out / "map" / ROOM_FILE_NAME, result, merged, T_room_from_wall))
+        ctx.figures["mesh"] |= {"room.glb: other walls seen": len(others),
+                                "room.glb: faces textured (the mapped wall)": len(room.walls[0].wall_map.mesh.faces),
+                                "room.glb: faces dark (side wall, floor: no map)":
+                                    0 if room.other is None else len(room.other.faces)}
     # A look at the textured mesh from the room, 40° to the side.
     import trimesh
 
@@ -530,6 +557,55 @@ def stage_photograph(ctx: DemoContext) -> None:
                 "photograph")
 
 
+def stage_room(ctx: DemoContext) -> None:
+    """The room session on map/room.glb: the head turned so the beam crosses the room corner beside the mapped
+    wall; the mapped wall registered, checked and shown, the side wall (no map: unknown) dark. Against the
+    site's truth: where the mapped wall's marks land, and whether anything lit falls on the side wall."""
+    from arproj.session.evaluate import room_landing_errors
+    from arproj.session.room import RoomSession, load_room_map, wall_points_in_view
+
+    glb = ctx.out / "map" / "room.glb"
+    if not glb.is_file():
+        raise RuntimeError("map/room.glb was not written: the mesh stage's range images saw no other wall")
+    room = load_room_map(glb)
+    session = ctx.session()  # the demo's robot and rig
+    site = ctx.site()
+    with RoomSession(session.rig, room.walls, ctx._robot, other=room.other) as rs:
+        rs.aim_at(0, (CORNER_AIM_X_M, ctx.aim_point()[1]))
+        verdicts = rs.update()
+        frame = rs.last_frame
+        assert frame is not None
+        cv2.imwrite(str(ctx.out / "room_frame.png"), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+        ctx._robot.sync_head()
+        landing = np.asarray(site.projector_landing().wall_index)
+        lit = frame.max(axis=2) > 0
+        # a projector pixel by the wall's edge (the corner line, the floor) straddles it: 2 px either side
+        near_edge = cv2.dilate((landing == 0).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        figures: dict[str, Any] = {
+            "registered on wall": rs.walls[rs.anchor].index,
+            "beam on the mapped wall %": 100 * float((landing == 0).mean()),
+            "beam on other surfaces %": 100 * float((landing != 0).mean()),
+            "lit pixels landing off the mapped wall": int((lit & (landing != 0)).sum()),
+            "… of them more than 2 px from its edge": int((lit & ~near_edge).sum()),
+            "frame says": " / ".join(rs.last_words)}
+        v = verdicts.get(0)
+        figures["mapped wall"] = "not in view" if v is None else "shown" if v.shown else \
+            "dark: " + "; ".join(v.decision.reasons)
+        if v is not None and v.shown and rs.T_room_from_projector is not None:
+            marks = wall_points_in_view(rs.walls, 0, rs.T_room_from_projector, rs.projector_intr, grid=(8, 5),
+                                        border=0.05)
+            errors, elsewhere = room_landing_errors(rs, site, 0, marks)
+            if len(errors):
+                figures |= {"registration error marks": len(errors), "marks landing elsewhere": elsewhere,
+                            "registration error mean mm": float(1000 * errors.mean()),
+                            "registration error max mm": float(1000 * errors.max())}
+        ctx.figures["room"] = figures
+    session.registration = None  # the head moved: the demo's own session measures again if used after this
+    ctx.picture("room_frame.png", "The room session's frame (map/room.glb) with the beam across the room corner: the "
+                "mapped wall drawn with its map; the side wall beside it and the floor, measured by the range "
+                "camera but not scanned, left dark — unknown, never safe.", "room")
+
+
 STAGES: list[tuple[str, Callable[[DemoContext], None], tuple[str, ...]]] = [
     ("scan", stage_scan, ()),
     ("map", stage_map, ("scan",)),
@@ -538,6 +614,7 @@ STAGES: list[tuple[str, Callable[[DemoContext], None], tuple[str, ...]]] = [
     ("wall pose", stage_wall_pose, ("map", "calibrate")),
     ("pre-warp", stage_prewarp, ("wall pose",)),
     ("photograph", stage_photograph, ("pre-warp",)),
+    ("room", stage_room, ("mesh", "wall pose")),
 ]
 
 

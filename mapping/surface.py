@@ -284,15 +284,21 @@ def load_range_images(path: str) -> tuple[list[RangeView], NDArray[np.float64] |
     return views, T_wall
 
 
+def merged_range_mesh(views: list[RangeView]) -> trimesh.Trimesh:
+    """Every range view triangulated and merged into one mesh, in the views' world frame (uncropped)."""
+    return merge_meshes([triangulate_range_image(d, intr, T) for d, intr, T in views])
+
+
 def wall_mesh_from_range_images(views: list[RangeView], bounds: tuple[float, float, float, float],
                                 T_world_from_wall: NDArray[np.float64] | None = None,
-                                margin_m: float = 0.05) -> trimesh.Trimesh:
+                                margin_m: float = 0.05, merged: trimesh.Trimesh | None = None) -> trimesh.Trimesh:
     """The measured surface in the wall frame, cropped to bounds (x_min, y_min, x_max, y_max) ± margin in x
     and y only, so other surfaces in front of the wall (the floor at its foot, clutter) come along:
-    split_wall_faces tells them apart (wall.glb draws them dark). Views triangulated and merged; without
-    T_world_from_wall the largest wall facing the first camera is recognised and its lower-left inlier corner
-    taken as the origin."""
-    merged = merge_meshes([triangulate_range_image(d, intr, T) for d, intr, T in views])
+    split_wall_faces tells them apart (wall.glb draws them dark). Views triangulated and merged (or `merged`,
+    merged_range_mesh's of these views); without T_world_from_wall the largest wall facing the first camera is
+    recognised and its lower-left inlier corner taken as the origin."""
+    if merged is None:
+        merged = merged_range_mesh(views)
     if T_world_from_wall is None:
         walls = walls_in_mesh(merged, viewpoint=views[0][2][:3, 3])
         if not walls:
@@ -311,3 +317,33 @@ def wall_mesh_from_range_images(views: list[RangeView], bounds: tuple[float, flo
     local.update_faces(keep)
     local.remove_unreferenced_vertices()
     return local
+
+
+OTHER_WALL_MIN_SIDE_M = 0.2  # a vertical plane of the range mesh this wide and high (at least) is another wall
+OTHER_WALL_MAX_PARALLEL_DEG = 20.0  # … turned this far from the mapped wall at least (not the same wall again)
+
+
+def other_walls_in_mesh(mesh: trimesh.Trimesh, T_world_from_wall: NDArray[np.float64],
+                        viewpoint: ArrayLike) -> list[WallPlane]:
+    """The walls a merged range mesh (world frame) holds besides the mapped one (T_world_from_wall: its plane
+    at z = 0, y up): vertical planes among the faces off that wall, turned from it, at least
+    OTHER_WALL_MIN_SIDE_M a side. Any: the range images cover more than one wall (a room corner)."""
+    T = np.asarray(T_world_from_wall, dtype=np.float64)
+    off = classify_faces(mesh, [T]) == OTHER_SURFACE
+    if off.sum() < tol.PLANE_MIN_POINTS:
+        return []
+    found = walls_in_mesh(_faces_subset(mesh, off), viewpoint, up=T[:3, 1])
+    turned = np.cos(np.radians(OTHER_WALL_MAX_PARALLEL_DEG))
+    return [w for w in found if abs(float(w.plane.normal @ T[:3, 2])) < turned
+            and min(w.width_m, w.height_m) >= OTHER_WALL_MIN_SIDE_M]
+
+
+def wall_size_in_mesh(mesh: trimesh.Trimesh, T_frame_from_wall: NDArray[np.float64],
+                      bounds: tuple[float, float, float, float]) -> tuple[float, float]:
+    """(width, height) m of a wall whose frame (origin its lower-left corner) is T_frame_from_wall in the
+    mesh's frame: as far as its faces in the mesh reach (classify_faces), never less than the map's bounds."""
+    faces = np.asarray(mesh.faces)[classify_faces(mesh, [T_frame_from_wall]) == 0]
+    local = transform_points(invert(np.asarray(T_frame_from_wall, dtype=np.float64)),
+                             np.asarray(mesh.vertices)[np.unique(faces)]) if len(faces) else np.zeros((0, 3))
+    reach = local[:, :2].max(axis=0) if len(local) else np.zeros(2)
+    return float(max(bounds[2], reach[0])), float(max(bounds[3], reach[1]))

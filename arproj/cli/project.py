@@ -5,6 +5,7 @@
     arproj project --map wall.glb --rig RIG --head /dev/ttyUSB0 --left 0 --right 1 --wall-prior prior.yaml \
         --window --screen 1
     arproj project --sim --site site.yaml --wall small_test_wall [--head URL]   # found again from the site file
+    arproj project --sim --room OUT/map/room.glb --follow '0:1.5,1.2;0:0.3,1.2'  # several walls of one room
     arproj project --site site.yaml --wall K --rig RIG --head URL --laser URL --left CAM --right CAM \
         --screen tcp://HOST:PORT                      # hardware: found again by the robot's 2-D laser
 """
@@ -43,6 +44,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     @app.command()
     def project(
         map_path: Path = typer.Option(None, "--map", help="wall.glb from `arproj map` (objects.json beside it)."),
+        room: Path = typer.Option(None, "--room", help="room.glb (`arproj map --range-images` of a room corner, "
+                                  "`arproj demo`): the walls of one room, each with its own map; the session "
+                                  "registers on the wall the beam falls on most and judges each wall in view. "
+                                  "--aim/--follow points are then K:X,Y (on room wall K; X,Y: the first)."),
         objects: Path = typer.Option(None, "--objects", help="objects.json, if not beside the GLB."),
         truth: Path = typer.Option(None, "--truth", help="Project a wall file's truth instead of a map "
                                    "(scanner wall YAML or a shipped wall's name; for trying the session before "
@@ -108,6 +113,13 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             except ValueError:
                 raise InputError(f"--wall {wall_key!r}: without --site the wall is the simulated room's index",
                                  "e.g. --wall 0, or pass --site site.yaml --wall KEY") from None
+        room_aims = []
+        if room is not None:  # points on any wall of the room: K:X,Y
+            from arproj.run.room import parse_room_point
+
+            room_aims = [parse_room_point(p, "--follow") for p in follow.split(";") if p.strip()] if follow \
+                else [parse_room_point(aim, "--aim")] if aim else []
+            aim = follow = None
         options = SessionOptions(
             map_path=map_path, objects=objects, truth=truth, rig_dir=rig_dir, sim=sim, seed=seed,
             wall_index=wall_index, distance=distance, incidence=incidence,
@@ -116,7 +128,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             screen=screen, head_url=head_url, laser_url=laser_url, left=left, right=right, wall_prior=wall_prior,
             head_fault=head_fault, commands=_stdin_lines() if interactive else None, site=site,
             site_key=wall_key if site is not None else None, record=record,
-            view=view)
+            view=view, room=room, room_aims=room_aims)
         result = run_session(options, say=lambda text: err_console.print(text, highlight=False))
         if as_json:
             print(json.dumps(result, indent=2))

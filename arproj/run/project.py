@@ -53,6 +53,8 @@ class SessionOptions:
     view: str | None = None    # --view live | FILE.rrd: the session in Rerun (arproj.run.view.SessionView)
     record: Path | None = None  # --record FILE.mcap: every cycle as ROS 2 messages (arproj.session.record)
     commands: Iterable[str] | None = None  # interactive: lines such as "aim 1.2,1.1", "drill 1.3,1.0", "update"
+    room: Path | None = None   # --room room.glb: several walls of one room (arproj.run.room), instead of --map
+    room_aims: list[tuple[int, tuple[float, float]]] = field(default_factory=list)  # (wall position, x, y) each
 
 
 class MultiOutput:
@@ -148,7 +150,12 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
     from arproj.session.session import ProjectionSession
 
     site_wall = open_site_wall(options)
-    wall_map = load_map(options, site_wall)
+    room_map = None
+    if options.room is not None:
+        from arproj.run.room import open_room_map, room_robot_placement
+
+        room_map = open_room_map(options)
+    wall_map = room_map.walls[0].wall_map if room_map is not None else load_map(options, site_wall)
     outputs: list = []
     memory = MemoryOutput()
     outputs.append(memory)
@@ -181,13 +188,14 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
             from render.gl import create_context
 
             ctx = create_context()
-            T_room_from_map = None
+            T_room_from_map = None if room_map is None else room_map.walls[0].T_room_from_wall
             if site_wall is not None:  # the scanned site's room, found again from the file (truth kept apart)
                 site, T_room_from_map = simulated_site_for(site_wall, options, ctx)
             else:
+                placed: dict = {} if room_map is None else room_robot_placement(room_map, options)
                 site = Site.build(seed=options.seed, ctx=ctx, robot={"distance_m": options.distance,
                                                             "incidence_deg": options.incidence,
-                                                            "wall": options.wall_index})
+                                                            "wall": options.wall_index, **placed})
             if rig is None:
                 rig = nominal_rig(site)
                 say("[yellow]note:[/] no --rig given: using the simulated robot's design values (uncalibrated); "
@@ -212,6 +220,10 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
                 raise InputError("hardware sessions need --wall-prior FILE (T_wall_from_robot), or --site FILE "
                                  "--wall KEY with the robot's 2-D laser (--laser URL)")
             robot = _hardware_robot(options, rig, multi, site_wall)
+        if room_map is not None:
+            from arproj.run.room import run_room
+
+            return run_room(rig, room_map, robot, options, say, ctx)
         result = _run(ProjectionSession, rig, wall_map, robot, options, memory, say, ctx)
         if site is not None and isinstance(robot, SimulatedRobot) and result.get("registration"):
             result["registration"]["truth"] = _registration_truth(site, robot, result["registration"], rig)

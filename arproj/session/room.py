@@ -1,16 +1,21 @@
-"""Several walls in one site frame: one beamer frame over an inside corner, each wall drawn with its own map.
+"""Several walls in one site frame: one beamer frame over an inside corner, each wall drawn with its own map,
+handed over from wall to wall as the head turns.
 
-The session registers on the first wall as ever (pattern, wall pose, closed loop, gate): the wall pose puts the
-robot in the room, so the projector's pose is known against every wall of the site's room. Each other wall in
-the beam gets its own closed loop (check marks on it, photographed, each camera's ray met with that wall's
-plane), its own small in-plane correction and its own gate. The frame is the walls' map meshes drawn in the
-room frame, each textured by its own wall's raster: a ray from the projector meets the nearest mesh (the
-depth test splits the image by wall), and where no wall's map is — or a wall's gate is closed — nothing is
-drawn: dark, unknown, never another wall's colours.
+Each update the session predicts from the head's reported angles (head model, the robot's last registered
+place in the room) where the beam falls, and registers on the wall it falls on most — the anchor — as ever
+(pattern, wall pose, closed loop, gate), in that wall's own ProjectionSession with the robot's prior carried to
+that wall through the room; when that wall's pattern gives no pose, on the next wall in the beam. The wall
+pose puts the robot in the room, so the projector's pose is known against every wall of the site's room. Each
+other wall in the beam gets its own closed loop (check marks on it, photographed, each camera's ray met with
+that wall's plane), its own small in-plane correction and its own gate; a wall out of the beam gets no
+verdict. The frame is the walls' map meshes drawn in the room frame, each textured by its own wall's raster:
+a ray from the projector meets the nearest mesh (the depth test splits the image by wall), and where no
+wall's map is — or a wall's gate is closed — nothing is drawn: dark, unknown, never another wall's colours.
 
-    walls = [RoomWall.of(0, map0, T_room_from_wall0, (w0, h0)), RoomWall.of(1, map1, T_room_from_wall1, (w1, h1))]
-    with RoomSession(rig, walls, robot) as s:
-        verdicts = s.update()          # {wall index: WallVerdict}
+    walls = [RoomWall(0, map0, T_room_from_wall0, (w0, h0)), RoomWall(1, map1, T_room_from_wall1, (w1, h1))]
+    with RoomSession(rig, walls, robot) as s:     # the robot's wall prior in walls[0]'s frame
+        s.aim_at(1, (0.4, 1.2))                   # the beam's centre on wall 1's point (0.4, 1.2) m
+        verdicts = s.update()                     # {position in walls: WallVerdict}; s.anchor registered on
 
 The walls' maps may come from one measured room mesh (room.glb, mapping.exports.glb.write_room_glb): each
 wall's faces with its own map, the faces on no mapped wall (floor, ceiling, clutter) drawn black, so they hide
@@ -19,7 +24,7 @@ what is behind them and show nothing (load_room_map, RoomSession(..., other=room
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +34,7 @@ from numpy.typing import NDArray
 from arproj.session import gate, overlays, registration
 from arproj.session import tolerances as tol
 from arproj.session.projection import check_mark_raster, textured_mesh
-from arproj.session.robot_io import RobotIO
+from arproj.session.robot_io import PoseInputs, RobotIO
 from arproj.session.session import CLOSED_LOOP_MARKS, ProjectionSession
 from arproj.session.wallmap import MAX_GLB_BYTES, MAX_WALL_M, WallMap, mesh_texture
 from geometry.errors import InputError
@@ -80,14 +85,18 @@ def first_wall_hits(walls: list[RoomWall], T_room_from_projector: NDArray[np.flo
     return which, where
 
 
+def _beam_grid(intr: Intrinsics, grid: tuple[int, int], border: float) -> NDArray[np.float64]:
+    """Projector pixels (n, 2) of a grid over the beamer's image, `border` (a share of it) off its edges."""
+    gx = np.linspace(border, 1 - border, grid[0]) * (intr.width - 1)
+    gy = np.linspace(border, 1 - border, grid[1]) * (intr.height - 1)
+    return np.array([[x, y] for y in gy for x in gx])
+
+
 def wall_points_in_view(walls: list[RoomWall], k: int, T_room_from_projector: NDArray[np.float64],
                         intr: Intrinsics, grid: tuple[int, int] = MARK_GRID, border: float = DRAWN_BORDER
                         ) -> NDArray[np.float64]:
     """Wall points (n, 2) of walls[k] where a grid over the beamer's image meets that wall first, on its map."""
-    gx = np.linspace(border, 1 - border, grid[0]) * (intr.width - 1)
-    gy = np.linspace(border, 1 - border, grid[1]) * (intr.height - 1)
-    px = np.array([[x, y] for y in gy for x in gx])
-    which, xy = first_wall_hits(walls, T_room_from_projector, intr, px)
+    which, xy = first_wall_hits(walls, T_room_from_projector, intr, _beam_grid(intr, grid, border))
     x0, y0, x1, y1 = walls[k].wall_map.extent
     ok = (which == k) & (xy[:, 0] > x0) & (xy[:, 0] < x1) & (xy[:, 1] > y0) & (xy[:, 1] < y1)
     return xy[ok]
@@ -235,22 +244,76 @@ class WallVerdict:
         return self.decision.show_map
 
 
+class _RobotOnWall:
+    """The robot as a session registering on another wall of the room sees it: the robot's wall prior (in
+    the first wall's frame, where the robot was set up) and its full wall-pose inputs carried to that wall's
+    frame through the room. The devices are the robot's own (the room session's caller closes them)."""
+
+    def __init__(self, robot: RobotIO, first: RoomWall, wall: RoomWall) -> None:
+        self.robot = robot
+        self.head = robot.head
+        self.wall = wall
+        self.T_wall_from_first = invert(wall.T_room_from_wall) @ first.T_room_from_wall
+
+    def capture(self, frame: NDArray[np.uint8]) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
+        return self.robot.capture(frame)
+
+    def show(self, frame: NDArray[np.uint8]) -> None:
+        self.robot.show(frame)
+
+    def laser_points(self) -> NDArray[np.float64] | None:
+        return self.robot.laser_points()
+
+    def wall_prior(self) -> tuple[NDArray[np.float64], float, str]:
+        T_first_from_robot, sigma, source = self.robot.wall_prior()
+        return self.T_wall_from_first @ T_first_from_robot, sigma, f"{source}, carried to wall {self.wall.index}"
+
+    def full_pose_inputs(self, normal_robot: NDArray[np.float64] | None = None) -> PoseInputs | None:
+        full = getattr(self.robot, "full_pose_inputs", lambda normal: None)(normal_robot)
+        if full is None:
+            return None
+        # the same room and start pose; the plane the pattern measured is this wall, the map's frame its own
+        return replace(full, wall_index=self.wall.index, T_room_from_map=self.wall.T_room_from_wall)
+
+    def close(self) -> None:
+        pass
+
+
+def beam_share(walls: list[RoomWall], T_room_from_projector: NDArray[np.float64], intr: Intrinsics,
+               grid: tuple[int, int] = MARK_GRID) -> NDArray[np.float64]:
+    """Share of a grid over the beamer's image (walls,) that meets each wall first: which walls are in view."""
+    which, _ = first_wall_hits(walls, T_room_from_projector, intr, _beam_grid(intr, grid, DRAWN_BORDER))
+    return np.bincount(which[which >= 0], minlength=len(walls))[:len(walls)] / float(len(which))
+
+
 class RoomSession:
-    """A projection session over several walls of one room: registers on walls[0], checks and gates each."""
+    """A projection session over several walls of one room, handing over from wall to wall as the head turns.
+
+    Each update predicts where the beam falls from the head's reported angles (head model, the robot's last
+    known place in the room) and registers on the wall that takes most of it — the anchor: its own
+    ProjectionSession (pattern, wall pose, closed loop, gate), the robot's prior carried to that wall's frame.
+    Every other wall with part of its map in the beam gets its own closed loop and gate (_judge); a wall out
+    of the beam gets no verdict and is not drawn. The robot's wall prior is in walls[0]'s frame."""
 
     def __init__(self, rig: Rig, walls: list[RoomWall], robot: RobotIO, ctx: object | None = None,
                  tolerance_m: float = tol.REGISTRATION_TOLERANCE_M, other: trimesh.Trimesh | None = None) -> None:
         if not walls:
             raise ValueError("RoomSession needs at least one wall")
+        self.rig = rig
         self.walls = walls
         self.robot = robot
+        self.ctx = ctx
         self.tolerance_m = tolerance_m
-        self.session = ProjectionSession(rig, walls[0].wall_map, robot, ctx=ctx, tolerance_m=tolerance_m)
+        self.sessions: dict[int, ProjectionSession] = {}  # position in walls → the session registering on it
+        self.anchor = 0
+        self.session = self._session_on(0)
         self.projector_intr = self.session.projector_intr
         self.room_projector = RoomProjector(walls, self.projector_intr, ctx, other)
         self.verdicts: dict[int, WallVerdict] = {}
         self.last_frame: NDArray[np.uint8] | None = None
         self.last_words: list[str] = []
+        self.log: list[str] = []  # the handovers (each wall's session keeps its own log)
+        self._T_room_from_robot_known: NDArray[np.float64] | None = None  # at the last registration
 
     def __enter__(self) -> RoomSession:
         return self
@@ -259,8 +322,16 @@ class RoomSession:
         self.close()
 
     def close(self) -> None:
-        self.session.close()
+        for s in self.sessions.values():
+            s.close()
         self.room_projector.release()
+
+    def _session_on(self, k: int) -> ProjectionSession:
+        if k not in self.sessions:
+            robot = self.robot if k == 0 else _RobotOnWall(self.robot, self.walls[0], self.walls[k])
+            self.sessions[k] = ProjectionSession(self.rig, self.walls[k].wall_map, robot, ctx=self.ctx,
+                                                 tolerance_m=self.tolerance_m)
+        return self.sessions[k]
 
     @property
     def T_room_from_projector(self) -> NDArray[np.float64] | None:
@@ -268,24 +339,60 @@ class RoomSession:
         reg = self.session.registration
         if reg is None:
             return None
-        return self.walls[0].T_room_from_wall @ _shift(-reg.correction_xy) @ reg.T_wall_from_projector
+        return self.walls[self.anchor].T_room_from_wall @ _shift(-reg.correction_xy) @ reg.T_wall_from_projector
 
     @property
     def T_room_from_robot(self) -> NDArray[np.float64] | None:
         reg = self.session.registration
-        return None if reg is None else self.walls[0].T_room_from_wall @ reg.T_wall_from_robot
+        return None if reg is None else self.walls[self.anchor].T_room_from_wall @ reg.T_wall_from_robot
+
+    def predicted_T_room_from_projector(self) -> NDArray[np.float64]:
+        """Where the projector is in the room by the head's reported angles alone: the head model on the robot's
+        last registered place in the room (before any registration: its prior on walls[0])."""
+        T_room_from_robot = self._T_room_from_robot_known
+        if T_room_from_robot is None:
+            T_room_from_robot = self.walls[0].T_room_from_wall @ self.robot.wall_prior()[0]
+        return T_room_from_robot @ self.session.T_robot_from_projector_model(self.session.head_deg())
+
+    def anchor_order(self) -> list[int]:
+        """The walls in the beam by the predicted pose, the one it falls on most first (the current anchor
+        first on a tie); the current anchor alone when the beam meets no wall."""
+        share = beam_share(self.walls, self.predicted_T_room_from_projector(), self.projector_intr)
+        order = sorted((k for k in range(len(self.walls)) if share[k] > 0),
+                       key=lambda k: (-share[k], k != self.anchor))
+        return order or [self.anchor]
+
+    def aim_at(self, k: int, wall_xy: tuple[float, float]) -> tuple[float, float]:
+        """Turn the head so the beam's centre lands on point (x, y) m of walls[k] (the robot's prior carried
+        to that wall); the next update hands over to whichever wall the beam then falls on most."""
+        return self._session_on(k).aim_at(wall_xy)
 
     def update(self, show: bool = True) -> dict[int, WallVerdict]:
-        """One cycle: the first wall's session update, then each other wall's closed loop and gate; the frame
-        draws each wall whose gate is open, on its own map; a warning when none is."""
-        first = self.session.update(show=False)
+        """One cycle: hand over to the wall the beam falls on most, its session's update, then each other wall
+        in view its closed loop and gate; the frame draws each wall whose gate is open, on its own map; a
+        warning when none is."""
+        for tried, anchor in enumerate(self.anchor_order()):  # the next wall when the pattern measured no pose
+            if anchor != self.anchor:
+                why = "the beam falls on it most" if not tried else \
+                    f"wall {self.walls[self.anchor].index}'s pattern gave no wall pose"
+                self.log.append(f"handover: registering on wall {self.walls[anchor].index} (was wall "
+                                f"{self.walls[self.anchor].index}): {why}")
+                self.anchor, self.session = anchor, self._session_on(anchor)
+            first = self.session.update(show=False)
+            if self.session.registration is not None:
+                break
         reg = self.session.registration
+        anchor = self.anchor
         verdicts: dict[int, WallVerdict] = {}
-        if reg is not None:
-            verdicts[0] = WallVerdict(self.walls[0].index, first, reg.T_wall_from_projector.copy(), reg.loop,
-                                      reg.correction_xy.copy(), reg.trusted)
-            for k in range(1, len(self.walls)):
-                verdicts[k] = self._judge(k)
+        T_room_from_projector = self.T_room_from_projector
+        if reg is not None and T_room_from_projector is not None:
+            self._T_room_from_robot_known = self.T_room_from_robot
+            verdicts[anchor] = WallVerdict(self.walls[anchor].index, first, reg.T_wall_from_projector.copy(),
+                                           reg.loop, reg.correction_xy.copy(), reg.trusted)
+            share = beam_share(self.walls, T_room_from_projector, self.projector_intr)
+            for k in range(len(self.walls)):
+                if k != anchor and share[k] > 0:
+                    verdicts[k] = self._judge(k)
         self.verdicts = verdicts
         if show:
             self.last_frame = self.render_frame(first)
@@ -294,7 +401,7 @@ class RoomSession:
 
     # -- another wall ------------------------------------------------------------------------------------
     def _judge(self, k: int) -> WallVerdict:
-        """Closed loop and gate on walls[k] from the registration made on walls[0]."""
+        """Closed loop and gate on walls[k] from the registration made on the anchor wall."""
         s, reg, w = self.session, self.session.registration, self.walls[k]
         assert reg is not None and s.last_evidence is not None
         T_room_from_projector, T_room_from_robot = self.T_room_from_projector, self.T_room_from_robot
@@ -318,7 +425,7 @@ class RoomSession:
         if len(drawn):
             # the pose's error on this wall, as on the first: its plane's offset and tilt, the in-plane σ, the
             # roll, the calibration — the lever from the pattern's centre measured in the room
-            aim_room = transform_points(self.walls[0].T_room_from_wall,
+            aim_room = transform_points(self.walls[self.anchor].T_room_from_wall,
                                         registration.aim_point_on_wall(reg.T_wall_from_projector, self.projector_intr))
             drawn_room = np.column_stack([drawn, np.zeros(len(drawn))]) @ w.T_room_from_wall[:3, :3].T \
                 + w.T_room_from_wall[:3, 3]

@@ -95,7 +95,7 @@ def test_every_stage_finished_and_resume_skipped_the_early_ones(finished_demo) -
     ctx, _, _ = finished_demo
     status = {n: r.status for n, r in ctx.stages.items()}
     assert status == {"scan": "skipped", "map": "skipped", "mesh": "done", "calibrate": "done",
-                      "wall pose": "done", "pre-warp": "done", "photograph": "done"}
+                      "wall pose": "done", "pre-warp": "done", "photograph": "done", "room": "done"}
 
 
 def test_report_shows_every_picture_and_the_accuracy_table(finished_demo) -> None:

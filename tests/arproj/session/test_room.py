@@ -130,3 +130,75 @@ def test_room_glb_split_by_wall_through_one_atlas_lands_each_map_on_its_own_wall
     for k in (0, 1):
         errors, elsewhere = _marks_land(site, room.walls, k, room.walls, marks_from=walls)
         assert elsewhere == 0 and len(errors) >= 10 and errors.mean() < 1e-3 and errors.max() < 2.5e-3
+
+
+def _dark_board_before(wall: RoomWall, x0: float, width: float, offset_m: float = 0.15) -> tuple:
+    """(texture, size, T_room_from_target) of a black board standing offset_m before wall's x0…x0 + width,
+    floor to 2.1 m: a person in the beam, hiding that part of the wall from the cameras."""
+    T = wall.T_room_from_wall
+    R = np.column_stack([T[:3, 0], -T[:3, 1], -T[:3, 2]])  # the board's printed side faces the room
+    origin = T[:3, :3] @ np.array([x0, 2.2, offset_m]) + T[:3, 3]
+    return np.zeros((8, 8), np.uint8), (width, 2.1), make_pose(R, origin)
+
+
+def _lit_on_walls(rs, walls: list[RoomWall]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every 4th pixel of the session's last frame: lit?, the wall (position; -1 none) its ray meets first, and
+    whether that is more than 1 cm from the corner line (a pixel's footprint there may straddle it)."""
+    intr = rs.projector_intr
+    rr, cc = np.mgrid[2:intr.height:4, 2:intr.width:4]
+    px = np.column_stack([cc.ravel(), rr.ravel()]).astype(np.float64)
+    which, xy = first_wall_hits(walls, rs.T_room_from_projector, intr, px)
+    off_line = np.abs(xy[:, 0] - np.where(which == 0, walls[0].size_m[0], 0.0)) > 0.01
+    return rs.last_frame[rr.ravel(), cc.ravel()].max(axis=1) > 0, which, off_line
+
+
+def test_turning_the_head_across_the_corner_hands_over_and_each_wall_is_drawn_on_its_own() -> None:
+    """The head turns from wall 0 across the inside corner onto wall 1 (simulated site, maps of both walls):
+    the session registers on the wall the beam falls on most, judges every other wall in view, and each shown
+    wall's marks land on their own wall within 2 mm (site truth). Across the corner a dark board before wall 1
+    hides its check marks: its gate closes and its part of the frame goes dark, wall 0 still shown."""
+    from arproj.session.evaluate import room_landing_errors
+    from arproj.session.output import MemoryOutput
+    from arproj.session.robot_io import SimulatedRobot, nominal_rig
+    from arproj.session.room import RoomSession
+    from arproj.session.wallmap import wall_map_from_wall
+    from scanner.wall import random_wall
+
+    site = Site.build(seed=0, ctx=shared_context(), room=ROOM, robot={"distance_m": 2.0, "incidence_deg": -30.0})
+    site.place_robot(2.0, -30.0, wall=0, along_m=site.walls[0].width_m - 0.45)
+    walls = [RoomWall(i, wall_map_from_wall(random_wall(i + 1, width_m=w.width_m, height_m=2.4, n_pipes=4,
+                                                        n_cables=4)), w.T_room_from_wall, (w.width_m, 2.4))
+             for i, w in enumerate(site.walls[:2])]
+    robot = SimulatedRobot.on_site(site, 0, MemoryOutput(), "truth", seed=0, head_speed_deg_s=1000.0)
+    w0 = walls[0].size_m[0]
+    # (wall aimed at, point on it) → the wall registered on, the walls judged
+    turns = [((0, (w0 - 1.5, 1.2)), 0, {0}), ((0, (w0 - 0.3, 1.2)), 0, {0, 1}),
+             ((1, (0.4, 1.2)), 1, {0, 1}), ((1, (1.0, 1.2)), 1, {1})]
+    try:
+        with RoomSession(nominal_rig(site), walls, robot, ctx=shared_context()) as rs:
+            for step, ((k, xy), anchor, judged) in enumerate(turns):
+                rs.aim_at(k, xy)
+                verdicts = rs.update()
+                assert rs.anchor == anchor and set(verdicts) == judged, (xy, rs.anchor, set(verdicts))
+                for j in judged:
+                    assert verdicts[j].shown, (xy, j, verdicts[j].decision.reasons)
+                    marks = wall_points_in_view(walls, j, rs.T_room_from_projector, rs.projector_intr, grid=(8, 5),
+                                                border=0.08)
+                    errors, elsewhere = room_landing_errors(rs, site, j, marks)
+                    assert elsewhere == 0 and len(errors) >= 8, (xy, j, len(errors), elsewhere)
+                    assert errors.mean() < 1e-3 and errors.max() < 2e-3, (xy, j, errors.mean(), errors.max())
+                if step == 1:  # across the corner: wall 1's map drawn; a dark board hides it, and it goes dark
+                    lit, which, off_line = _lit_on_walls(rs, walls)
+                    assert lit[(which == 1) & off_line].any()
+                    site.add_target(*_dark_board_before(walls[1], 0.02, 1.2))
+                    verdicts = rs.update()
+                    assert rs.anchor == 0 and verdicts[0].shown and not verdicts[1].shown
+                    assert any("pattern lost" in r for r in verdicts[1].decision.reasons)
+                    lit, which, off_line = _lit_on_walls(rs, walls)
+                    assert not lit[(which == 1) & off_line].any() and lit[which == 0].any()
+                    assert any("Wall 1" in line and "dark" in line for line in rs.last_words)
+                    site.remove_targets()
+            assert rs.log == ["handover: registering on wall 1 (was wall 0): the beam falls on it most"]
+    finally:
+        robot.close()
+        site.release()
