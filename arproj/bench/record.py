@@ -88,7 +88,7 @@ def trial(wall_name: str, kind: str, folder: Path, seed: int) -> tuple[float, fl
     settings = ScanSettings(plan="adaptive", seed=seed, serial=True)
     target = folder / kind / ("scan.mcap" if kind == "mcap" else "scan.rrd")
     target.parent.mkdir(parents=True, exist_ok=True)
-    meta = {"wall_width_m": wall.width_m, "wall_height_m": wall.height_m}
+    meta = {"wall_width_m": wall.width_m, "wall_height_m": wall.height_m, "sensor": settings.sensor.to_dict()}
     start = time.perf_counter()
     writer = 0.0
     with open_watchers(meta, target if kind == "mcap" else None, str(target) if kind == "rerun" else None) as w:
