@@ -41,6 +41,9 @@ from scanner.sensor_model import additive_units
 from scanner.wall import Wall
 
 REACH_TOLERANCE_M = 1e-6
+# the adaptive plan's stages whose every pass it searches for crossings (AdaptivePlanner._peaks); it does not
+# search its point, stud and follow passes
+SEARCHED_STAGES = ("coarse", "socket", "confirm", "trace")
 # The adaptive planner's behaviour, recorded in every log: a log is resumed only by the planner that made it.
 # 2: fastener passes across bumps and weak finds, seams by localised poses, DIN priors.
 ADAPTIVE_PLANNER_VERSION = 2
@@ -350,6 +353,10 @@ class AdaptivePlanner:
     _at: np.ndarray = field(default_factory=lambda: np.zeros(2), repr=False)  # where the last pass ended
     _frame: FrameTarget | None = field(default=None, repr=False)  # the frame being planned
     _placed: dict[int, tuple[FrameTarget, tuple[float, float, float]]] = field(default_factory=dict, repr=False)
+    # the frame's searched passes: (id of the samples, axis) -> (those samples, kept so the id stays theirs,
+    # the peaks per channel): each pass searched once, by the plan (coarse rows again for studs) or for a watcher
+    _searched: dict[tuple[int, str], tuple[Samples, dict[str, list[tuple[float, float, float]]]]] = field(
+        default_factory=dict, repr=False)
     priors: Priors | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
@@ -409,16 +416,37 @@ class AdaptivePlanner:
         lo, hi, fixed = round(lo, 6), round(hi, 6), round(fixed, 6)
         return PassSpec(frame.frame_id, stage, "y", (fixed, lo), (fixed, hi))
 
-    def _peaks(self, samples: Samples, axis: str) -> list[tuple[float, float, float, str]]:
-        """[(position, height, width, channel)] of the strongest channel per object along a pass, corrected
-        for the inductive hysteresis (the sensor lags by hysteresis_m along the motion)."""
+    def channel_peaks(self, spec: PassSpec, samples: Samples) -> dict[str, list[float]] | None:
+        """Where the plan finds objects along a pass it searches (stages SEARCHED_STAGES), per LINE_PEAKS
+        channel before the channels are merged: positions along the pass's drive coordinate, corrected for the
+        inductive hysteresis. None for a pass the plan does not search. For a watcher (the live view): searched
+        now, the plan reuses the search when it takes the pass's crossings."""
+        if spec.stage not in SEARCHED_STAGES or spec.axis not in ("x", "y"):
+            return None
+        return {channel: [p[0] for p in peaks] for channel, peaks in self._channel_search(samples, spec.axis).items()}
+
+    def _channel_search(self, samples: Samples, axis: str) -> dict[str, list[tuple[float, float, float]]]:
+        """{channel: [(position, height, width)]} of every LINE_PEAKS channel's peaks along a pass, corrected
+        for the inductive hysteresis (the sensor lags by hysteresis_m along the motion); searched once a frame."""
+        key = (id(samples), axis)
+        done = self._searched.get(key)
+        if done is not None and done[0] is samples:
+            return done[1]
         coord, inductive_lag = self._along(samples, axis)
         seams = self._seam_ends(coord, axis)
-        found = []
+        found: dict[str, list[tuple[float, float, float]]] = {}
         for channel in (c.name for c in LINE_PEAKS):
             lag = inductive_lag if channel == INDUCTIVE.name else 0.0
-            for peak in detect_peaks(coord, samples[channel], self.peaks, keep_cut=seams):
-                found.append((peak.position - lag, peak.height, peak.width, channel))
+            found[channel] = [(peak.position - lag, peak.height, peak.width)
+                              for peak in detect_peaks(coord, samples[channel], self.peaks, keep_cut=seams)]
+        self._searched[key] = (samples, found)
+        return found
+
+    def _peaks(self, samples: Samples, axis: str) -> list[tuple[float, float, float, str]]:
+        """[(position, height, width, channel)] of the strongest channel per object along a pass, corrected
+        for the inductive hysteresis (see _channel_search)."""
+        found = [(*peak, channel) for channel, peaks in self._channel_search(samples, axis).items()
+                 for peak in peaks]
         found.sort()
         merged: list[tuple[float, float, float, str]] = []
         for item in found:  # the same object in both channels: keep one
@@ -506,6 +534,7 @@ class AdaptivePlanner:
 
     def frame_stages(self, frame: FrameTarget) -> StageGenerator:
         self._frame = frame
+        self._searched = {}  # the seams, and so the searches, are the frame's
         coarse = self._coarse(frame)
         self.ordered_by[frame.frame_id] = {}  # a frame's plan is made afresh (estimates, resumes)
         if self.priors is not None:

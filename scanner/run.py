@@ -52,7 +52,10 @@ class Backend(Protocol):
 
 class ScanWatcher(Protocol):
     """Who sees the scan as it happens (a recording, a live view): every frame as the robot reports it, every
-    pass with its samples, resumed ones included, in the order the scan makes them."""
+    pass with its samples, resumed ones included, in the order the scan makes them. A pass's row is its log
+    row; where the adaptive plan searches the pass for crossings, it also holds `peaks`: {channel: [position
+    along the pass's drive coordinate, m]} of each LINE_PEAKS channel (AdaptivePlanner.channel_peaks), the
+    search the plan makes anyway, so that a watcher showing them need not search again."""
 
     def frame(self, row: dict[str, Any], report: FrameReport) -> None: ...
     def scanned(self, row: dict[str, Any], samples: Samples) -> None: ...
@@ -212,7 +215,11 @@ def run_scan(wall: Wall, backend: Backend, robot: Any, *, plan_kind: str = "dens
                         log.append_pass(spec.row(pass_id, t, t + duration), samples)
                     measured += 1
                 if watch is not None:
-                    watch.scanned(spec.row(pass_id, t, t + duration), samples)
+                    watched = spec.row(pass_id, t, t + duration)
+                    peaks = planner.channel_peaks(spec, samples) if isinstance(planner, AdaptivePlanner) else None
+                    if peaks is not None:
+                        watched["peaks"] = peaks
+                    watch.scanned(watched, samples)
                 t += duration
                 uv_now = np.asarray(spec.end_uv, dtype=np.float64)
                 results[pass_id] = samples

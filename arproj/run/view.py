@@ -7,7 +7,9 @@ Entities (2-D, wall metres, x along the wall, y up):
   wall/coverage             the cells the safety channels covered so far (both: green, one: amber)
   wall/map/<channel>        the growing map of each channel: the mean reading in each cell so far (0..1 of
                             the display as 0..255), nothing where no sample fell
-  wall/detections/<channel> the peaks the passes found along their course so far (what the adaptive plan traces)
+  wall/detections/<channel> the peaks the passes found along their course so far: where the adaptive plan
+                            searched a pass, its own finds per channel (what it traces; scanner.run's `peaks`),
+                            else (a channel it does not trace, a raster plan) the view's coarser search
   wall/robot                the robot's localised pose at each frame (the drive frame's origin and axes)
   wall/scanner              the scanner on the drives: where each pass sent since ended, the last one largest
 Rerun's 2-D view draws y downwards: every position is sent as (x, top − y), so the wall stands upright.
@@ -69,8 +71,12 @@ def open_recording(view: str, application_id: str) -> rr.RecordingStream:
 class ScanView:
     """A scanner.run.ScanWatcher that streams the scan to Rerun."""
 
-    def __init__(self, view: str, wall_width_m: float, wall_height_m: float, resolution_m: float = 0.005) -> None:
+    def __init__(self, view: str, wall_width_m: float, wall_height_m: float, resolution_m: float = 0.005,
+                 hysteresis_m: float = 0.0) -> None:
+        """hysteresis_m: the inductive sensor's lag along the motion (the scan log's sensor), undone in the
+        view's own search as the plan undoes it in its."""
         self.rec = open_recording(view, "arproj_scan")
+        self.hysteresis_m = hysteresis_m
         self.info = GridInfo.covering(0.0, 0.0, wall_width_m, wall_height_m, resolution_m)
         self.top = self.info.origin_y + self.info.height * self.info.resolution
         self.sums = {c: np.zeros(self.info.shape) for c in CHANNEL_NAMES}
@@ -152,14 +158,18 @@ class ScanView:
             return
         coord = np.asarray(samples["drive_u_m" if axis == "x" else "drive_v_m"], dtype=np.float64)
         order = np.argsort(coord)
+        planned = row.get("peaks") or {}  # the plan's own search of the pass, where it made one
         for channel in CHANNEL_NAMES:
-            values = np.asarray(samples.get(channel, ()), dtype=np.float64)
-            if len(values) != len(coord) or not np.isfinite(values).all():
+            if channel in planned:
+                at = np.asarray(planned[channel], dtype=np.float64)
+            else:
+                values = np.asarray(samples.get(channel, ()), dtype=np.float64)
+                if len(values) != len(coord) or not np.isfinite(values).all():
+                    continue
+                lag = self.hysteresis_m * float(row["direction"]) if channel == INDUCTIVE.name else 0.0
+                at = np.array([p.position - lag for p in detect_peaks(coord, values, grid_step_m=DETECTION_STEP_M)])
+            if not len(at):
                 continue
-            peaks = detect_peaks(coord, values, grid_step_m=DETECTION_STEP_M)
-            if not peaks:
-                continue
-            at = np.array([p.position for p in peaks])
             found = np.column_stack([np.interp(at, coord[order], xy[order, 0]),
                                      np.interp(at, coord[order], xy[order, 1])])
             self.found[channel].append(self._screen(found))

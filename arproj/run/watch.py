@@ -58,7 +58,8 @@ def open_watchers(meta: dict[str, Any], record: Path | None, view: str | None) -
         if view is not None:
             from arproj.run.view import ScanView
 
-            live = ScanView(view, float(meta["wall_width_m"]), float(meta["wall_height_m"]))
+            live = ScanView(view, float(meta["wall_width_m"]), float(meta["wall_height_m"]),
+                            hysteresis_m=float((meta.get("sensor") or {}).get("hysteresis_m", 0.0) or 0.0))
             closers.append(live.close)
             watchers.append(live)
         yield Watchers(watchers) if watchers else None

@@ -183,3 +183,57 @@ def test_the_adaptive_row_spacing_is_an_option_recorded_in_the_log_and_checked(t
                               "--row-spacing", "25"), capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "--row-spacing = 25 m" in bad.stderr and "Traceback" not in bad.stderr
     assert not (tmp_path / "x.db").exists()
+
+
+def test_a_watcher_gets_the_plans_own_peaks_searched_once_and_the_plan_is_unchanged(monkeypatch):
+    """Every pass of a stage the adaptive plan searches reaches the watcher with the plan's per-channel peaks
+    (what detect_peaks finds on its samples, less the inductive lag), each pass searched once; no other pass
+    carries any; and asking for them changes no pass of the plan."""
+    import scanner.plan as plan_module
+    from scanner.channels import INDUCTIVE, LINE_PEAKS
+    from scanner.peaks import PeakConfig, detect_peaks
+
+    wall = load_wall(shipped_walls()["paper_test_plate"])
+    plain = _uninterrupted(wall, "adaptive", 3)
+    searches = []
+
+    def counted(*args, **kwargs):
+        if "keep_cut" in kwargs:  # the crossings' search (the plan's other searches cut no peak)
+            searches.append(id(args[1]))
+        return detect_peaks(*args, **kwargs)
+
+    monkeypatch.setattr(plan_module, "detect_peaks", counted)
+    seen = []
+
+    class Watcher:
+        def frame(self, row, report):
+            pass
+
+        def scanned(self, row, samples):
+            seen.append((row, samples))
+
+    sensor, drives = SensorConfig(), DriveConfig()
+    world, robot = simulated_site(wall, sensor, drives, 3)
+    watched = run_scan(wall, DirectBackend(world), robot, plan_kind="adaptive", sensor=sensor, drives=drives,
+                       watch=Watcher())
+    assert watched.samples.keys() == plain.samples.keys()
+    for key, values in plain.samples.items():
+        np.testing.assert_array_equal(watched.samples[key], values, err_msg=key)
+    with_peaks = [(row, s) for row, s in seen if "peaks" in row]
+    assert all((row["stage"] in plan_module.SEARCHED_STAGES) == ("peaks" in row) for row, _ in seen)
+    assert {row["stage"] for row, _ in with_peaks} == {"coarse", "confirm", "trace"}
+    assert {row["stage"] for row, _ in seen} - set(plan_module.SEARCHED_STAGES) == {"follow", "point"}  # both kinds
+    assert len(searches) == len(LINE_PEAKS) * len(with_peaks)  # once each, though the studs look at rows again
+    found = 0
+    for row, samples in with_peaks:
+        coord = samples["drive_u_m" if row["axis"] == "x" else "drive_v_m"]
+        for channel in (c.name for c in LINE_PEAKS):
+            lag = sensor.hysteresis_m * row["direction"] if channel == INDUCTIVE.name else 0.0
+            # a peak cut by a seam's end is kept at some ends of some frames (the plan's seams): between the two
+            inner, outer = ({round(p.position - lag, 9) for p in detect_peaks(coord, samples[channel], PeakConfig(),
+                                                                              keep_cut=cut)}
+                            for cut in ((False, False), (True, True)))
+            got = {round(p, 9) for p in row["peaks"][channel]}
+            assert inner <= got <= outer, (row, channel)
+            found += len(got)
+    assert found > 20
