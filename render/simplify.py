@@ -35,14 +35,25 @@ from geometry.intrinsics import Intrinsics
 
 PROJECTED_ERROR_PX = 0.1  # the fraction of a projector pixel the simplified picture may differ by
 # The search stops when the face counts of the last prefix within the bound and the first beyond it are this
-# close: a few per cent more triangles than the least possible, for half the measurements.
-SEARCH_RATIO = 1.15
+# close: at most 5 % more triangles than the least possible. (1.15 drew 4-6 % more triangles on the benchmark's
+# wall, each frame, to save two or three prefix measurements once, at upload.)
+SEARCH_RATIO = 1.05
 # Barycentric slack for "inside a triangle" in UV: points on a shared edge or vertex are found in either.
 _INSIDE_EPS = 1e-9
 _MAX_GRID = 1024  # cells per side of the UV lookup grid
 # Tolerances are rounded down to this ladder (19 % steps), so views a little apart share one simplified mesh.
 _LADDER_STEP = 2.0 ** 0.25
 _CACHED_MESHES = 4  # collapse histories kept for meshes uploaded again (a new texture on the same wall)
+# fast_simplification collapses, pass after pass (100 at most), every edge whose quadric error (a squared
+# distance, in the units of the positions given) is below 1e-9 · (pass + 3)^agg. At its default agg = 7 on a mesh
+# in metres the first pass's threshold is (1.5 mm)²: every collapse finer than that happens in that one pass, in
+# index order rather than cheapest first, and a prefix within a sub-millimetre bound ends at the first collapse
+# that overshoots it (the benchmark's wall: 3-7x the triangles within 0.02-0.2 mm). With agg = 3 and positions
+# scaled so that the first threshold is (_FIRST_PASS_M)², the passes run from 0.01 mm to 2 mm of error, cheapest
+# first, over the bounds projectors need (about 0.01 mm at 0.3 m to 0.5 mm at 5 m).
+_DECIMATION_AGG = 3.0
+_FIRST_PASS_M = 1e-5
+_DECIMATION_SCALE = math.sqrt(1e-9 * 3.0 ** _DECIMATION_AGG) / _FIRST_PASS_M
 
 
 def _slope(intr: Intrinsics) -> float:
@@ -133,9 +144,12 @@ class Decimation:
         self._used = np.flatnonzero(used)
         self._tree = cKDTree(self.vertices[self._used])
         self._vertex_faces = _incidence(self.faces, len(self.vertices))
+        # Decimated and replayed in scaled units (see _DECIMATION_SCALE); positions come back in metres.
+        self._scaled = np.ascontiguousarray(self.vertices * _DECIMATION_SCALE)
         if len(self.faces) > 1:
-            _, _, collapses = fast_simplification.simplify(self.vertices, self.faces, target_count=1,
-                                                           preserve_border=True, return_collapses=True)
+            _, _, collapses = fast_simplification.simplify(self._scaled, self.faces, target_count=1,
+                                                           agg=_DECIMATION_AGG, preserve_border=True,
+                                                           return_collapses=True)
             self.collapses = np.ascontiguousarray(np.asarray(collapses, dtype=np.int32).reshape(-1, 2))
         else:
             self.collapses = np.zeros((0, 2), dtype=np.int32)
@@ -156,12 +170,12 @@ class Decimation:
             return Simplified(v[kept], self.uv[kept], index[self.faces], self._original[kept], 0.0, 0.0)
         c = self.collapses[:k]
         # Positions: fast_simplification's own replay of these collapses (the point each merge moved to).
-        _replay.load_int32(len(v), len(self.faces), len(c), v, self.faces, np.ascontiguousarray(c))
+        _replay.load_int32(len(v), len(self.faces), len(c), self._scaled, self.faces, np.ascontiguousarray(c))
         _replay.replay()
         alive = np.ones(len(v), dtype=bool)
         alive[c[:, 1]] = False
         replayed = np.empty_like(v)
-        replayed[alive] = _replay.return_points()
+        replayed[alive] = _replay.return_points() / _DECIMATION_SCALE
         positions = v.copy()  # the replay keeps float32 positions: only the merged-into vertices take them
         merged_into = np.unique(c[:, 0])
         positions[merged_into] = replayed[merged_into]

@@ -124,7 +124,9 @@ def test_the_simplified_mesh_draws_the_full_meshs_picture(gl_context: moderngl.C
     diff = picture_difference(full.color, got.color, full.depth, got.depth)
     assert not failures(diff), f"{pose}: {failures(diff)} ({diff})"
     assert diff.edges > 3000  # the comparison saw the checker's edges
-    assert triangles < 0.4 * len(wall.faces)
+    # A tenth of the triangles (4,888 of 51,200): collapses are replayed cheapest first down to this bound
+    # (fast_simplification at its default aggressiveness on metres kept 13,994).
+    assert triangles < 0.15 * len(wall.faces)
 
 
 def test_a_loosened_bound_fails_the_same_comparison(gl_context: moderngl.Context, wall: trimesh.Trimesh,
@@ -135,8 +137,10 @@ def test_a_loosened_bound_fails_the_same_comparison(gl_context: moderngl.Context
                  for name, got in ((n, loose.render(INTR, look_at(*p, up=[0, 1, 0]), depth=True))
                                    for n, p in POSES.items())}
     assert all(failures(d) for d in diffs.values()), diffs
-    frontal = diffs["frontal"]
-    assert frontal.depth_mm > DEPTH_MM and frontal.edge_shift_px > EDGE_PX
+    # Both measures tell: seen obliquely, the surface moved off the wall's plane shifts texture edges too (seen
+    # head-on it moves mostly along the rays, which the depth shows and the edges hardly do).
+    oblique = diffs["oblique"]
+    assert oblique.depth_mm > DEPTH_MM and oblique.edge_shift_px > EDGE_PX
 
 
 def test_coming_closer_simplifies_again_within_the_bound(gl_context: moderngl.Context, wall: trimesh.Trimesh
