@@ -72,6 +72,23 @@ class Registration:
     calibration_px: float = 0.0
 
 
+@dataclass
+class PoseFromPlane:
+    """The wall pose made from a measured plane (ProjectionSession.pose_from_plane): T_wall_from_robot and
+    T_robot_from_projector; in_plane_sigma_m / roll_sigma_rad: the pose's in-plane 1σ (with the map frame's)
+    and its rotation about the normal; source (None: the robot's prior, snapped onto the plane); covariance
+    (6, 6) of the fused pose (wallpose.pose.WallPose.covariance; None without fusion) and frame_sigma_m, the
+    map frame's own in-plane σ in the room that adds to it."""
+
+    T_wall_from_robot: NDArray[np.float64]
+    T_robot_from_projector: NDArray[np.float64]
+    in_plane_sigma_m: float
+    roll_sigma_rad: float
+    source: str | None
+    covariance: NDArray[np.float64] | None
+    frame_sigma_m: float
+
+
 def _quality(rig: Rig, section: str, key: str) -> float:
     """A calibration quality figure from rig.yaml (0 when the rig does not record it)."""
     value = rig.quality.get(section, {}).get(key) if isinstance(rig.quality, dict) else None
@@ -199,19 +216,17 @@ class ProjectionSession:
         return Uncertainty(projector_rotation_deg=rot, projector_translation_m=trans)
 
     def pose_from_plane(self, plane: PlaneEstimate, views: ViewRig, scan: NDArray[np.float64] | None,
-                        images: tuple[NDArray, NDArray] | None = None
-                        ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float, str | None]:
-        """The full wall pose from a measured plane: (T_wall_from_robot, T_robot_from_projector, in-plane σ m,
-        roll σ rad, source or None). With the robot's localization, floor and laser (full_pose_inputs) the
-        wall-pose package fuses them (and the wall's edges in images = (left, right) photos, where in view);
-        otherwise the plane is snapped onto the robot's prior. Raises InputError
+                        images: tuple[NDArray, NDArray] | None = None) -> PoseFromPlane:
+        """The full wall pose from a measured plane. With the robot's localization, floor and laser
+        (full_pose_inputs) the wall-pose package fuses them (and the wall's edges in images = (left, right)
+        photos, where in view); otherwise the plane is snapped onto the robot's prior. Raises InputError
         (not enough evidence) when the fusion declines."""
         T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
         prior, in_plane_sigma, _ = self.robot.wall_prior()
         full = getattr(self.robot, "full_pose_inputs", lambda normal: None)(plane.normal)
         if full is None:
-            return (registration.snap_to_plane(prior, plane.normal, plane.distance), T_robot_from_projector,
-                    in_plane_sigma, 0.0, None)
+            return PoseFromPlane(registration.snap_to_plane(prior, plane.normal, plane.distance),
+                                 T_robot_from_projector, in_plane_sigma, 0.0, None, None, in_plane_sigma)
         pose = estimate_wall_pose(plane, full.wall_index, full.room, full.localized_T_room_from_robot,
                                   T_robot_from_projector, scan, full.sigma_m, full.sigma_deg,
                                   camera_images=None if images is None else camera_images(views, *images),
@@ -220,8 +235,9 @@ class ProjectionSession:
             invert(full.T_room_from_map) @ pose.T_room_from_robot  # the map's frame, in the room wall's plane
         in_plane = float(np.sqrt(pose.sigma_along_m ** 2 + pose.sigma_height_m ** 2 + full.extra_sigma_m ** 2))
         sources = [full.source if s == "localization" else s for s in pose.sources]
-        return (T_wall_from_robot, T_robot_from_projector, in_plane, float(np.radians(pose.sigma_roll_deg)),
-                "wall pose (" + ", ".join(sources) + ")")
+        return PoseFromPlane(T_wall_from_robot, T_robot_from_projector, in_plane,
+                             float(np.radians(pose.sigma_roll_deg)), "wall pose (" + ", ".join(sources) + ")",
+                             pose.covariance, full.extra_sigma_m)
 
     def estimate(self) -> Registration | None:
         """Project the pattern, estimate the wall plane and the projector's pose; None (and pose_failure set)
@@ -258,14 +274,15 @@ class ProjectionSession:
             return None
         scan = self.robot.laser_points()
         try:
-            T_wall_from_robot, T_robot_from_projector, in_plane_sigma, roll_sigma_rad, fused = \
-                self.pose_from_plane(plane, views, scan, (left, right))
+            fused = self.pose_from_plane(plane, views, scan, (left, right))
         except InputError as err:
             self.pose_failure = _why_declined(err)
             self.log.append(f"wall pose: {self.pose_failure}")
             return None
-        if fused:
-            source = fused
+        T_wall_from_robot, T_robot_from_projector = fused.T_wall_from_robot, fused.T_robot_from_projector
+        in_plane_sigma, roll_sigma_rad = fused.in_plane_sigma_m, fused.roll_sigma_rad
+        if fused.source:
+            source = fused.source
         self.pose_failure = None
         T_wall_from_projector = T_wall_from_robot @ T_robot_from_projector
         aim = registration.aim_point_on_wall(T_wall_from_projector, self.projector_intr)
@@ -276,9 +293,14 @@ class ProjectionSession:
         # where the map is drawn (on the map and in the image) and how well each part is registered there
         drawn = registration.choose_marks(T_wall_from_projector, self.projector_intr, self.wall_map.extent,
                                           grid=(16, 10), border=0.02)
+        # the fused pose's own error at each drawn point, from its full covariance (turns of the robot move the
+        # far points, and a heading or pitch error moves every point by the distance to the wall)
+        pose_sigma = None if fused.covariance is None else \
+            registration.pose_sigma_on_wall_m(drawn, T_wall_from_robot, fused.covariance)
         local = registration.local_registration_sigma_m(
             plane.centre_distance_95_m, plane.normal_95_deg, T_wall_from_projector, drawn, aim[:2],
-            in_plane_sigma, footprint, calib_px, roll_sigma_rad)
+            in_plane_sigma if pose_sigma is None else fused.frame_sigma_m, footprint, calib_px, roll_sigma_rad,
+            pose_sigma_m=pose_sigma)
         trusted = registration.trusted_region(drawn, local, self.tolerance_m)
         sigma = trusted.sigma_m if trusted.usable else (float(local.max()) if len(local) else float("inf"))
         laser_offset = None if scan is None else registration.laser_plane_offset_m(T_wall_from_robot, scan, aim[0])
