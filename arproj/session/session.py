@@ -27,12 +27,13 @@ from arproj.session import tolerances as tol
 from arproj.session.projection import MapProjector
 from arproj.session.robot_io import RobotIO
 from arproj.session.wallmap import WallMap
+from calibration.stereo import sample_stereo
 from devices.errors import DeviceError
 from geometry.errors import InputError
 from geometry.poses import invert, make_pose, transform_points
 from geometry.rig import Rig
 from wallpose.edges import camera_images
-from wallpose.estimate import PlaneEstimate, Uncertainty, estimate_plane
+from wallpose.estimate import PlaneEstimate, StereoDraw, Uncertainty, estimate_plane
 from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
 from wallpose.pattern import choose_pattern
 from wallpose.pose import estimate_wall_pose
@@ -42,6 +43,8 @@ HEAD_MOVED_DEG = 0.005  # reported angles that differ by more than this since th
 CLOSED_LOOP_MARKS = 48  # check marks per closed-loop frame
 HEAD_MODEL_FALLBACK_DEG = 10.0  # projector-pose prior when the head model disagrees with the pattern
 HEAD_MODEL_FALLBACK_M = 0.05
+STEREO_DRAWS = 48  # draws of the stereo pair from its calibration's covariance, carried into each plane estimate
+STEREO_DRAW_SEED = 20  # fixed: the same rig gives the same plane covariance every time
 LOG_LINES = 1000  # the session log keeps this many last lines (a line or two a cycle: minutes of cycles)
 # The craftsman's words (as gate.SAY_*) for a head found off its model while its encoder saw nothing: the map is
 # measured again from the pattern and still shown, but the mount slipped and a person must look at it.
@@ -139,6 +142,7 @@ class ProjectionSession:
         self.last_words: list[str] = []  # what the last frame says in words (legend lines or warning)
         self.last_legend: overlays.LegendLayout | None = None  # where the last map frame's legend went
         self.log: deque[str] = deque(maxlen=LOG_LINES)  # bounded: a session may run for days
+        self._stereo_draws: tuple[StereoDraw, ...] | None = None
 
     def __enter__(self) -> ProjectionSession:
         return self
@@ -213,7 +217,20 @@ class ProjectionSession:
         head's repeatability, wider when the head calibration's residual says so (3σ of its RMS)."""
         rot = max(Uncertainty().projector_rotation_deg, 3.0 * _quality(self.rig, "head", "rotation_rms_deg"))
         trans = max(Uncertainty().projector_translation_m, 3e-3 * _quality(self.rig, "head", "position_rms_mm"))
-        return Uncertainty(projector_rotation_deg=rot, projector_translation_m=trans)
+        return Uncertainty(projector_rotation_deg=rot, projector_translation_m=trans, stereo_draws=self.stereo_draws)
+
+    @property
+    def stereo_draws(self) -> tuple[StereoDraw, ...]:
+        """The stereo pair drawn from the rig's calibration covariance (none when the rig does not keep it): how
+        far a calibration this good may put the wall (a depth bias of millimetres at 4 m is within it)."""
+        if self._stereo_draws is None:
+            stereo = self.rig.quality.get("stereo", {}) if isinstance(self.rig.quality, dict) else {}
+            doc = stereo.get("parameter_covariance") if isinstance(stereo, dict) else None
+            self._stereo_draws = () if not doc else tuple(sample_stereo(
+                self.rig.intrinsics["camera_left"], self.rig.intrinsics["camera_right"],
+                self.rig.pose("T_camera_right_from_camera_left"), doc, stereo.get("distortion_model", "k1k2p1p2k3"),
+                np.random.default_rng(STEREO_DRAW_SEED), STEREO_DRAWS))
+        return self._stereo_draws
 
     def pose_from_plane(self, plane: PlaneEstimate, views: ViewRig, scan: NDArray[np.float64] | None,
                         images: tuple[NDArray, NDArray] | None = None) -> PoseFromPlane:
@@ -263,7 +280,8 @@ class ProjectionSession:
                 # The head model misplaces the projector (head re-mounted, head calibration off): measure the
                 # projector's pose from the pattern itself; the closed loop and the gate still judge the result.
                 plane = estimate_plane(left, right, pattern, views, uncertainty=Uncertainty(
-                    projector_rotation_deg=HEAD_MODEL_FALLBACK_DEG, projector_translation_m=HEAD_MODEL_FALLBACK_M))
+                    projector_rotation_deg=HEAD_MODEL_FALLBACK_DEG, projector_translation_m=HEAD_MODEL_FALLBACK_M,
+                    stereo_draws=self.stereo_draws))
                 self.head_slipped = True
                 self.log.append(f"head model disagrees with the pattern (projector "
                                 f"{plane.projector_correction_deg:.2f}° / {plane.projector_correction_m * 1000:.1f} mm "
