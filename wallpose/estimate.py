@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from geometry.intrinsics import Intrinsics
 from geometry.poses import rotation_angle_deg
 from geometry.threads import single_threaded
 from wallpose import limits
@@ -18,12 +19,18 @@ from wallpose.plane import PROJ_TRANS, MLFit, MLModel, ViewData, fit_ml, plane_i
 from wallpose.rig import ViewRig
 from wallpose.triangulate import triangulate_stereo
 
+# One draw of the stereo pair from its calibration's covariance: (left, right, T_right_from_left).
+StereoDraw = tuple[Intrinsics, Intrinsics, NDArray[np.float64]]
+
 
 @dataclass(frozen=True)
 class Uncertainty:
     """How well the rig is known, as Gaussian σ: the projector's pose at the head's current angles (the head's
     repeatability, or the head calibration's residual), and per camera an image-wide corner offset and gradient
-    (what the stereo calibration and corner finding get wrong for a whole image alike)."""
+    (what the stereo calibration and corner finding get wrong for a whole image alike). stereo_draws: the
+    stereo pair drawn from its calibration's covariance (calibration.stereo.sample_stereo); the plane's
+    covariance then holds what the calibration leaves unknown (a depth scale or vergence error tilts and moves
+    the whole plane alike, growing with the distance squared), beside the corners' noise."""
 
     projector_rotation_deg: float = limits.PROJECTOR_ROTATION_SIGMA_DEG
     projector_translation_m: float = limits.PROJECTOR_TRANSLATION_SIGMA_M
@@ -31,6 +38,7 @@ class Uncertainty:
     image_gradient_px: float = limits.IMAGE_GRADIENT_SIGMA_PX
     projector_offset_px: float = limits.PROJECTOR_OFFSET_SIGMA_PX
     projector_gradient_px: float = limits.PROJECTOR_GRADIENT_SIGMA_PX
+    stereo_draws: tuple[StereoDraw, ...] = ()
 
 
 @dataclass
@@ -158,7 +166,31 @@ def _estimate_from_detections(det_l: Detection, det_r: Detection, pattern: Check
     _check_views_agree(model, fit)
     if used < matched:
         warnings.append(f"{matched - used} of {matched} corners are off the plane (another surface or occluded)")
-    return _result(model, fit, pattern, views, matched, warnings, u)
+    calibration = _stereo_calibration_covariance(det_l, det_r, np.flatnonzero(fit.inliers & both), views,
+                                                 u.stereo_draws)
+    return _result(model, fit, pattern, views, matched, warnings, u, calibration)
+
+
+def _stereo_calibration_covariance(det_l: Detection, det_r: Detection, ids: NDArray[np.int64], views: ViewRig,
+                                   draws: tuple[StereoDraw, ...]) -> NDArray[np.float64]:
+    """(3, 3) covariance of the plane p (left camera frame, p·X = 1) that the stereo calibration's own
+    uncertainty leaves: the corners seen by both cameras re-triangulated with each draw of the pair and the
+    plane refitted, its scatter about the calibrated pair's plane. Zeros without draws."""
+    if not draws or len(ids) < limits.MIN_CORNERS:
+        return np.zeros((3, 3))
+    row_l = {int(c): k for k, c in enumerate(det_l.corner_ids)}
+    row_r = {int(c): k for k, c in enumerate(det_r.corner_ids)}
+    px_l = det_l.pixels[[row_l[int(c)] for c in ids]]
+    px_r = det_r.pixels[[row_r[int(c)] for c in ids]]
+
+    def plane_of(left: Intrinsics, right: Intrinsics, T_right_from_left: NDArray[np.float64]) -> NDArray:
+        X = triangulate_stereo(left.rays(px_l)[:, :2], right.rays(px_r)[:, :2], T_right_from_left)
+        X = X[np.all(np.isfinite(X), axis=1)]
+        return np.asarray(np.linalg.lstsq(X, np.ones(len(X)), rcond=None)[0], dtype=np.float64)
+
+    p0 = plane_of(views.camera_left, views.camera_right, views.T_camera_right_from_camera_left)
+    dp = np.array([plane_of(*draw) - p0 for draw in draws])
+    return np.asarray(dp.T @ dp / len(dp), dtype=np.float64)
 
 
 def _erode_off_plane_border(model: MLModel, fit: MLFit, pattern: CheckerPattern) -> MLFit:
@@ -215,7 +247,7 @@ def _check_views_agree(model: MLModel, fit: MLFit) -> None:
 
 
 def _result(model: MLModel, fit: MLFit, pattern: CheckerPattern, views: ViewRig, matched: int,
-            warnings: list[str], u: Uncertainty) -> PlaneEstimate:
+            warnings: list[str], u: Uncertainty, calibration_covariance: NDArray[np.float64]) -> PlaneEstimate:
     T_robot_from_left = views.T_robot_from_camera_left
     theta = fit.theta
     nd = plane_in_frame(theta[:3], T_robot_from_left)
@@ -226,7 +258,7 @@ def _result(model: MLModel, fit: MLFit, pattern: CheckerPattern, views: ViewRig,
         dp[k] = h
         J[:, k] = (plane_in_frame(theta[:3] + dp, T_robot_from_left)
                    - plane_in_frame(theta[:3] - dp, T_robot_from_left)) / (2 * h)
-    cov_p = fit.covariance[:3, :3]
+    cov_p = fit.covariance[:3, :3] + calibration_covariance
     cov_nd = J @ cov_p @ J.T
     normal_var = np.linalg.eigvalsh(cov_nd[:3, :3])[-1]
     normal_95 = float(np.degrees(np.sqrt(limits.CHI2_2_95 * max(normal_var, 0.0))))

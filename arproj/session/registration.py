@@ -104,11 +104,38 @@ def pixel_footprint_m(T_wall_from_projector: NDArray[np.float64], projector: Int
     return float(max(np.linalg.norm(pts[1] - pts[0]), np.linalg.norm(pts[2] - pts[0])))
 
 
+def pose_sigma_on_wall_m(points_xy: NDArray[np.float64], T_wall_from_robot: NDArray[np.float64],
+                         covariance: NDArray[np.float64]) -> NDArray[np.float64]:
+    """1σ (n,) metres by which wall points (n, 2) fixed to the robot move in the wall's plane when the robot's
+    pose is off by δ ~ N(0, covariance) (6, 6): δ = (rotation vector rad, translation m) in the robot frame,
+    T_true = T_wall_from_robot · exp(δ) (wallpose.pose.WallPose.covariance).
+
+    Where a projector pixel lands moves with the robot: by its in-plane translation, by a rotation about the
+    normal times the distance from where the robot's position is pinned, and by a turn about an in-plane axis
+    (pitch, heading) times the distance to the wall — all with their correlations. The length of the 2-D
+    displacement (root of the 2x2 covariance's trace). Its out-of-plane part slides the landing along the ray:
+    that is the plane's share (local_registration_sigma_m's offset and tilt terms)."""
+    pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    R = np.asarray(T_wall_from_robot, dtype=np.float64)[:3, :3]
+    X = transform_points(invert(T_wall_from_robot), np.column_stack([pts, np.zeros(len(pts))]))
+    # d(wall point)/dδ = R·[-[X]×, I] for a robot-frame point X; only the wall's x and y rows
+    J = np.zeros((len(pts), 2, 6))
+    Rxy = R[:2]
+    J[:, :, 3:] = Rxy
+    skew = np.zeros((len(pts), 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -X[:, 2], X[:, 1], -X[:, 0]
+    skew -= np.transpose(skew, (0, 2, 1))
+    J[:, :, :3] = -np.einsum("ij,njk->nik", Rxy, skew)
+    cov = np.einsum("nij,jk,nlk->nil", J, np.asarray(covariance, dtype=np.float64), J)
+    return np.asarray(np.sqrt(np.maximum(np.trace(cov, axis1=1, axis2=2), 0.0)), dtype=np.float64)
+
+
 def local_registration_sigma_m(centre_distance_95_m: float, normal_95_deg: float,
                                T_wall_from_projector: NDArray[np.float64], points_xy: NDArray[np.float64],
                                centre_xy: NDArray[np.float64], in_plane_sigma_m: float, footprint_m: float,
                                calibration_px: float, roll_sigma_rad: float = 0.0,
-                               lever_m: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+                               lever_m: NDArray[np.float64] | None = None,
+                               pose_sigma_m: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """1σ registration error on the wall (metres) at each drawn point points_xy (n, 2).
 
     A plane offset δd slides a point's landing along the wall by δd·tan(i), i the local incidence of the
@@ -117,6 +144,8 @@ def local_registration_sigma_m(centre_distance_95_m: float, normal_95_deg: float
     calibration's residual (projector pixels × footprint). On an
     oblique wall the far end of the image is much less certain than the part near the aim point. lever_m (n,):
     each point's distance from the pattern's centre when that lies off this wall (another wall of a corner).
+    pose_sigma_m (n,): the wall pose's own 1σ at each point (pose_sigma_on_wall_m, from its full covariance);
+    it takes the place of the roll term, in_plane_sigma_m is then what adds to it (the map frame's σ).
     """
     pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
     rays = np.column_stack([pts, np.zeros(len(pts))]) - T_wall_from_projector[:3, 3]
@@ -127,8 +156,8 @@ def local_registration_sigma_m(centre_distance_95_m: float, normal_95_deg: float
     s_offset = centre_distance_95_m / tol.Z95 * tan_i
     s_normal = lever * np.radians(normal_95_deg) / np.sqrt(5.991) * tan_i
     s_calib = calibration_px * footprint_m
-    s_roll = lever * roll_sigma_rad
-    return np.sqrt(s_offset ** 2 + s_normal ** 2 + in_plane_sigma_m ** 2 + s_calib ** 2 + s_roll ** 2)
+    s_pose = lever * roll_sigma_rad if pose_sigma_m is None else np.asarray(pose_sigma_m, dtype=np.float64)
+    return np.sqrt(s_offset ** 2 + s_normal ** 2 + in_plane_sigma_m ** 2 + s_calib ** 2 + s_pose ** 2)
 
 
 def inside_polygon(points_xy: NDArray[np.float64], polygon: NDArray[np.float64]) -> NDArray[np.bool_]:

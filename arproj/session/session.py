@@ -27,12 +27,13 @@ from arproj.session import tolerances as tol
 from arproj.session.projection import MapProjector
 from arproj.session.robot_io import RobotIO
 from arproj.session.wallmap import WallMap
+from calibration.stereo import sample_stereo
 from devices.errors import DeviceError
 from geometry.errors import InputError
 from geometry.poses import invert, make_pose, transform_points
 from geometry.rig import Rig
 from wallpose.edges import camera_images
-from wallpose.estimate import PlaneEstimate, Uncertainty, estimate_plane
+from wallpose.estimate import PlaneEstimate, StereoDraw, Uncertainty, estimate_plane
 from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
 from wallpose.pattern import choose_pattern
 from wallpose.pose import estimate_wall_pose
@@ -42,6 +43,8 @@ HEAD_MOVED_DEG = 0.005  # reported angles that differ by more than this since th
 CLOSED_LOOP_MARKS = 48  # check marks per closed-loop frame
 HEAD_MODEL_FALLBACK_DEG = 10.0  # projector-pose prior when the head model disagrees with the pattern
 HEAD_MODEL_FALLBACK_M = 0.05
+STEREO_DRAWS = 48  # draws of the stereo pair from its calibration's covariance, carried into each plane estimate
+STEREO_DRAW_SEED = 20  # fixed: the same rig gives the same plane covariance every time
 LOG_LINES = 1000  # the session log keeps this many last lines (a line or two a cycle: minutes of cycles)
 # The craftsman's words (as gate.SAY_*) for a head found off its model while its encoder saw nothing: the map is
 # measured again from the pattern and still shown, but the mount slipped and a person must look at it.
@@ -70,6 +73,23 @@ class Registration:
     in_plane_sigma_m: float = 0.0   # the wall pose's in-plane 1σ and roll 1σ: another wall's σ is drawn from them
     roll_sigma_rad: float = 0.0
     calibration_px: float = 0.0
+
+
+@dataclass
+class PoseFromPlane:
+    """The wall pose made from a measured plane (ProjectionSession.pose_from_plane): T_wall_from_robot and
+    T_robot_from_projector; in_plane_sigma_m / roll_sigma_rad: the pose's in-plane 1σ (with the map frame's)
+    and its rotation about the normal; source (None: the robot's prior, snapped onto the plane); covariance
+    (6, 6) of the fused pose (wallpose.pose.WallPose.covariance; None without fusion) and frame_sigma_m, the
+    map frame's own in-plane σ in the room that adds to it."""
+
+    T_wall_from_robot: NDArray[np.float64]
+    T_robot_from_projector: NDArray[np.float64]
+    in_plane_sigma_m: float
+    roll_sigma_rad: float
+    source: str | None
+    covariance: NDArray[np.float64] | None
+    frame_sigma_m: float
 
 
 def _quality(rig: Rig, section: str, key: str) -> float:
@@ -122,6 +142,7 @@ class ProjectionSession:
         self.last_words: list[str] = []  # what the last frame says in words (legend lines or warning)
         self.last_legend: overlays.LegendLayout | None = None  # where the last map frame's legend went
         self.log: deque[str] = deque(maxlen=LOG_LINES)  # bounded: a session may run for days
+        self._stereo_draws: tuple[StereoDraw, ...] | None = None
 
     def __enter__(self) -> ProjectionSession:
         return self
@@ -196,22 +217,33 @@ class ProjectionSession:
         head's repeatability, wider when the head calibration's residual says so (3σ of its RMS)."""
         rot = max(Uncertainty().projector_rotation_deg, 3.0 * _quality(self.rig, "head", "rotation_rms_deg"))
         trans = max(Uncertainty().projector_translation_m, 3e-3 * _quality(self.rig, "head", "position_rms_mm"))
-        return Uncertainty(projector_rotation_deg=rot, projector_translation_m=trans)
+        return Uncertainty(projector_rotation_deg=rot, projector_translation_m=trans, stereo_draws=self.stereo_draws)
+
+    @property
+    def stereo_draws(self) -> tuple[StereoDraw, ...]:
+        """The stereo pair drawn from the rig's calibration covariance (none when the rig does not keep it): how
+        far a calibration this good may put the wall (a depth bias of millimetres at 4 m is within it)."""
+        if self._stereo_draws is None:
+            stereo = self.rig.quality.get("stereo", {}) if isinstance(self.rig.quality, dict) else {}
+            doc = stereo.get("parameter_covariance") if isinstance(stereo, dict) else None
+            self._stereo_draws = () if not doc else tuple(sample_stereo(
+                self.rig.intrinsics["camera_left"], self.rig.intrinsics["camera_right"],
+                self.rig.pose("T_camera_right_from_camera_left"), doc, stereo.get("distortion_model", "k1k2p1p2k3"),
+                np.random.default_rng(STEREO_DRAW_SEED), STEREO_DRAWS))
+        return self._stereo_draws
 
     def pose_from_plane(self, plane: PlaneEstimate, views: ViewRig, scan: NDArray[np.float64] | None,
-                        images: tuple[NDArray, NDArray] | None = None
-                        ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float, str | None]:
-        """The full wall pose from a measured plane: (T_wall_from_robot, T_robot_from_projector, in-plane σ m,
-        roll σ rad, source or None). With the robot's localization, floor and laser (full_pose_inputs) the
-        wall-pose package fuses them (and the wall's edges in images = (left, right) photos, where in view);
-        otherwise the plane is snapped onto the robot's prior. Raises InputError
+                        images: tuple[NDArray, NDArray] | None = None) -> PoseFromPlane:
+        """The full wall pose from a measured plane. With the robot's localization, floor and laser
+        (full_pose_inputs) the wall-pose package fuses them (and the wall's edges in images = (left, right)
+        photos, where in view); otherwise the plane is snapped onto the robot's prior. Raises InputError
         (not enough evidence) when the fusion declines."""
         T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
         prior, in_plane_sigma, _ = self.robot.wall_prior()
         full = getattr(self.robot, "full_pose_inputs", lambda normal: None)(plane.normal)
         if full is None:
-            return (registration.snap_to_plane(prior, plane.normal, plane.distance), T_robot_from_projector,
-                    in_plane_sigma, 0.0, None)
+            return PoseFromPlane(registration.snap_to_plane(prior, plane.normal, plane.distance),
+                                 T_robot_from_projector, in_plane_sigma, 0.0, None, None, in_plane_sigma)
         pose = estimate_wall_pose(plane, full.wall_index, full.room, full.localized_T_room_from_robot,
                                   T_robot_from_projector, scan, full.sigma_m, full.sigma_deg,
                                   camera_images=None if images is None else camera_images(views, *images),
@@ -220,8 +252,9 @@ class ProjectionSession:
             invert(full.T_room_from_map) @ pose.T_room_from_robot  # the map's frame, in the room wall's plane
         in_plane = float(np.sqrt(pose.sigma_along_m ** 2 + pose.sigma_height_m ** 2 + full.extra_sigma_m ** 2))
         sources = [full.source if s == "localization" else s for s in pose.sources]
-        return (T_wall_from_robot, T_robot_from_projector, in_plane, float(np.radians(pose.sigma_roll_deg)),
-                "wall pose (" + ", ".join(sources) + ")")
+        return PoseFromPlane(T_wall_from_robot, T_robot_from_projector, in_plane,
+                             float(np.radians(pose.sigma_roll_deg)), "wall pose (" + ", ".join(sources) + ")",
+                             pose.covariance, full.extra_sigma_m)
 
     def estimate(self) -> Registration | None:
         """Project the pattern, estimate the wall plane and the projector's pose; None (and pose_failure set)
@@ -247,7 +280,8 @@ class ProjectionSession:
                 # The head model misplaces the projector (head re-mounted, head calibration off): measure the
                 # projector's pose from the pattern itself; the closed loop and the gate still judge the result.
                 plane = estimate_plane(left, right, pattern, views, uncertainty=Uncertainty(
-                    projector_rotation_deg=HEAD_MODEL_FALLBACK_DEG, projector_translation_m=HEAD_MODEL_FALLBACK_M))
+                    projector_rotation_deg=HEAD_MODEL_FALLBACK_DEG, projector_translation_m=HEAD_MODEL_FALLBACK_M,
+                    stereo_draws=self.stereo_draws))
                 self.head_slipped = True
                 self.log.append(f"head model disagrees with the pattern (projector "
                                 f"{plane.projector_correction_deg:.2f}° / {plane.projector_correction_m * 1000:.1f} mm "
@@ -258,14 +292,15 @@ class ProjectionSession:
             return None
         scan = self.robot.laser_points()
         try:
-            T_wall_from_robot, T_robot_from_projector, in_plane_sigma, roll_sigma_rad, fused = \
-                self.pose_from_plane(plane, views, scan, (left, right))
+            fused = self.pose_from_plane(plane, views, scan, (left, right))
         except InputError as err:
             self.pose_failure = _why_declined(err)
             self.log.append(f"wall pose: {self.pose_failure}")
             return None
-        if fused:
-            source = fused
+        T_wall_from_robot, T_robot_from_projector = fused.T_wall_from_robot, fused.T_robot_from_projector
+        in_plane_sigma, roll_sigma_rad = fused.in_plane_sigma_m, fused.roll_sigma_rad
+        if fused.source:
+            source = fused.source
         self.pose_failure = None
         T_wall_from_projector = T_wall_from_robot @ T_robot_from_projector
         aim = registration.aim_point_on_wall(T_wall_from_projector, self.projector_intr)
@@ -276,9 +311,14 @@ class ProjectionSession:
         # where the map is drawn (on the map and in the image) and how well each part is registered there
         drawn = registration.choose_marks(T_wall_from_projector, self.projector_intr, self.wall_map.extent,
                                           grid=(16, 10), border=0.02)
+        # the fused pose's own error at each drawn point, from its full covariance (turns of the robot move the
+        # far points, and a heading or pitch error moves every point by the distance to the wall)
+        pose_sigma = None if fused.covariance is None else \
+            registration.pose_sigma_on_wall_m(drawn, T_wall_from_robot, fused.covariance)
         local = registration.local_registration_sigma_m(
             plane.centre_distance_95_m, plane.normal_95_deg, T_wall_from_projector, drawn, aim[:2],
-            in_plane_sigma, footprint, calib_px, roll_sigma_rad)
+            in_plane_sigma if pose_sigma is None else fused.frame_sigma_m, footprint, calib_px, roll_sigma_rad,
+            pose_sigma_m=pose_sigma)
         trusted = registration.trusted_region(drawn, local, self.tolerance_m)
         sigma = trusted.sigma_m if trusted.usable else (float(local.max()) if len(local) else float("inf"))
         laser_offset = None if scan is None else registration.laser_plane_offset_m(T_wall_from_robot, scan, aim[0])

@@ -123,3 +123,29 @@ def test_projector_off_its_prior_is_its_own_case_and_measurable() -> None:
     T_true = invert(case.views.T_robot_from_camera_left) @ case.scene.T_robot_from_projector_true
     assert rotation_angle_deg(est.T_camera_left_from_projector, T_true) < 0.05
     assert abs(est.projector_correction_deg - 2.0) < 0.05
+
+
+def test_the_stereo_calibrations_uncertainty_widens_the_plane_to_cover_a_vergence_error() -> None:
+    """A right camera turned by a vergence error the calibration cannot rule out moves the whole plane at 4 m by
+    millimetres (depth error ∝ distance²/baseline): the corners' noise alone does not cover it, the calibration's
+    draws (here ±that error) do."""
+    from dataclasses import replace
+
+    from geometry.poses import make_pose, rotation_about
+
+    case = make_case(4.0, 0.0, seed=3)
+    photos = case.photos()
+    views = case.views
+    vergence = np.radians(0.003)
+
+    def turned(angle: float) -> np.ndarray:
+        return make_pose(rotation_about([0.0, 1.0, 0.0], angle)) @ views.T_camera_right_from_camera_left
+
+    wrong = replace(views, T_camera_right_from_camera_left=turned(vergence))
+    draws = tuple((views.camera_left, views.camera_right, turned(s * vergence)) for s in (-1.0, 1.0))
+    alone = estimate_plane(*photos, case.pattern, wrong)
+    offset = abs(alone.offset_at(case.true_centre()))
+    assert offset > alone.centre_distance_95_m  # the corners' noise does not cover the calibration's error
+    covered = estimate_plane(*photos, case.pattern, wrong, uncertainty=Uncertainty(stereo_draws=draws))
+    assert offset <= covered.centre_distance_95_m
+    assert covered.normal_95_deg >= alone.normal_95_deg

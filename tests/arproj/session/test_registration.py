@@ -123,3 +123,27 @@ def test_oblique_far_end_is_less_certain_and_left_out_of_the_trusted_region():
     assert trusted.sigma_m == pytest.approx(sigma[inside].max(), rel=1e-6)  # the same number, up to round-off
     assert registration.trusted_region(grid, np.full(len(grid), 0.0001), 0.010).polygon is None
     assert not registration.trusted_region(grid, np.full(len(grid), 0.05), 0.010).usable
+
+
+def test_pose_sigma_on_wall_is_how_far_robot_fixed_wall_points_move_and_counts_pitch_times_distance():
+    from geometry.poses import pose_from_vector
+
+    T = _T_wall_from_robot()  # robot 2 m before the wall, its origin at wall (1.5, 0)
+    points = np.array([[1.5, 1.2], [4.0, 2.0], [0.2, 0.4]])
+    robot_points = transform_points(invert(T), np.column_stack([points, np.zeros(len(points))]))
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(6, 6)) * np.array([1e-3, 1e-3, 1e-3, 2e-3, 2e-3, 2e-3])
+    cov = A @ A.T  # correlated rotations and translations
+    sigma = registration.pose_sigma_on_wall_m(points, T, cov)
+    draws = rng.multivariate_normal(np.zeros(6), cov, 4000)
+    moved = np.array([transform_points(T @ pose_from_vector(d), robot_points)[:, :2] - points for d in draws])
+    assert sigma == pytest.approx(np.sqrt((moved ** 2).sum(axis=2).mean(axis=0)), rel=0.05)
+    # a pitch of the robot alone (about its y axis, along the wall) moves the point it faces by distance × angle:
+    # the roll-about-the-aim-point model (lever 0 there, no in-plane σ) said nothing at all
+    pitch = np.zeros((6, 6))
+    pitch[1, 1] = np.radians(0.05) ** 2
+    facing = registration.pose_sigma_on_wall_m(np.array([[1.5, 0.0]]), T, pitch)
+    assert facing[0] == pytest.approx(2.0 * np.radians(0.05), rel=1e-6)
+    old = registration.local_registration_sigma_m(0.0, 0.0, T, np.array([[1.5, 0.0]]), np.array([1.5, 0.0]),
+                                                  0.0, 0.001, 0.0, roll_sigma_rad=np.radians(0.05))
+    assert old[0] == 0.0

