@@ -423,8 +423,8 @@ class RoomSession:
         ev.closed_loop_errors_m = np.linalg.norm(loop.errors_xy - correction, axis=1)
         ev.stereo_residual_px = loop.residual_px if loop.seen.any() else None
         if len(drawn):
-            # the pose's error on this wall, as on the first: its plane's offset and tilt, the in-plane σ, the
-            # roll, the calibration — the lever from the pattern's centre measured in the room
+            # the pose's error on this wall, as on the first: its plane's offset and tilt, the pose's own σ, the
+            # calibration — the lever from the pattern's centre measured in the room
             aim_room = transform_points(self.walls[self.anchor].T_room_from_wall,
                                         registration.aim_point_on_wall(reg.T_wall_from_projector, self.projector_intr))
             drawn_room = np.column_stack([drawn, np.zeros(len(drawn))]) @ w.T_room_from_wall[:3, :3].T \
@@ -433,9 +433,13 @@ class RoomSession:
             mid = transform_points(invert(T_wall_from_projector), [[*drawn[len(drawn) // 2], 0.0]])
             footprint = registration.pixel_footprint_m(T_wall_from_projector, self.projector_intr,
                                                        self.projector_intr.project(mid)[0])
+            # the fused pose's own error at this wall's points, from its full covariance (as on the first wall)
+            pose_sigma = None if reg.pose_covariance is None else \
+                registration.pose_sigma_on_wall_m(drawn, T_wall_from_robot, reg.pose_covariance)
             local = registration.local_registration_sigma_m(
                 reg.plane.centre_distance_95_m, reg.plane.normal_95_deg, T_wall_from_projector, drawn,
-                drawn[0], reg.in_plane_sigma_m, footprint, reg.calibration_px, reg.roll_sigma_rad, lever_m=lever)
+                drawn[0], reg.in_plane_sigma_m if pose_sigma is None else reg.frame_sigma_m, footprint,
+                reg.calibration_px, reg.roll_sigma_rad, lever_m=lever, pose_sigma_m=pose_sigma)
             trusted = registration.trusted_region(drawn, local, self.tolerance_m)
             if len(ev.closed_loop_errors_m):
                 trusted, sigma = registration.checked_region(

@@ -73,6 +73,10 @@ class Registration:
     in_plane_sigma_m: float = 0.0   # the wall pose's in-plane 1σ and roll 1σ: another wall's σ is drawn from them
     roll_sigma_rad: float = 0.0
     calibration_px: float = 0.0
+    # the fused pose's (6, 6) covariance in the robot frame and the map frame's σ beside it (None: no fusion):
+    # another wall's σ is drawn from them as this wall's is (registration.pose_sigma_on_wall_m)
+    pose_covariance: NDArray[np.float64] | None = None
+    frame_sigma_m: float = 0.0
 
 
 @dataclass
@@ -325,7 +329,8 @@ class ProjectionSession:
         self.registration = Registration(head, T_wall_from_robot, T_wall_from_projector, plane, sigma, source,
                                          distance, inc, footprint, scan, laser_offset, trusted,
                                          in_plane_sigma_m=in_plane_sigma, roll_sigma_rad=roll_sigma_rad,
-                                         calibration_px=calib_px)
+                                         calibration_px=calib_px, pose_covariance=fused.covariance,
+                                         frame_sigma_m=fused.frame_sigma_m)
         self.log.append(f"wall pose: {plane.corners} corners, σ {sigma * 1000:.2f} mm on the wall, "
                         f"{distance:.2f} m at {inc:.0f}°, in-plane from {source}")
         return self.registration
@@ -341,26 +346,37 @@ class ProjectionSession:
         T_right_from_left = self.rig.pose("T_camera_right_from_camera_left")
         T_wall_uncorrected = make_pose(None, [-reg.correction_xy[0], -reg.correction_xy[1], 0.0]) \
             @ reg.T_wall_from_projector
-        marks = registration.choose_marks(T_wall_uncorrected, self.projector_intr, self.wall_map.extent)
+        T_robot_from_right = T_robot_from_left @ invert(T_right_from_left)
+        radius_m = registration.mark_radius_m(reg.distance_m, cam_l)
+        r_px = radius_m * cam_l.fx / reg.distance_m
+
+        def seen_by_both(points: NDArray[np.float64]) -> NDArray[np.float64]:
+            # a mark neither camera can photograph cannot be checked: it is not projected nor counted as lost
+            keep = np.ones(len(points), bool)
+            for T_robot_from_cam, cam in ((T_robot_from_left, cam_l), (T_robot_from_right, cam_r)):
+                uv = registration.predict_camera_pixels(points, reg.T_wall_from_robot, T_robot_from_cam, cam)
+                keep &= np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= 2 * r_px) & (uv[:, 1] >= 2 * r_px) \
+                    & (uv[:, 0] <= cam.width - 1 - 2 * r_px) & (uv[:, 1] <= cam.height - 1 - 2 * r_px)
+            return points[keep]
+
+        marks = seen_by_both(registration.choose_marks(T_wall_uncorrected, self.projector_intr,
+                                                       self.wall_map.extent))
         checked = None if reg.trusted is None else reg.trusted.checked_polygon
         if checked is not None:  # verify what may be shown, not the rest
             dense = registration.choose_marks(T_wall_uncorrected, self.projector_intr, self.wall_map.extent,
                                               grid=(16, 10))
-            dense = dense[registration.inside_polygon(dense, checked)]
+            dense = seen_by_both(dense[registration.inside_polygon(dense, checked)])
             step = max(1, int(np.ceil(len(dense) / CLOSED_LOOP_MARKS)))
-            marks = dense[::step]  # as many marks as usual, spread over the trusted part
+            marks = dense[::step]  # as many marks as usual, spread over the trusted part the cameras see
         if len(marks) < tol.CLOSED_LOOP_MIN_FEATURES:
             reg.loop = registration.ClosedLoopResult(marks, np.zeros((0, 2)), np.zeros(len(marks), bool),
                                                      float("nan"), float("nan"))
             return reg.loop
-        radius_m = registration.mark_radius_m(reg.distance_m, cam_l)
         self.map_projector.set_check_marks(marks, radius_m)
         frame = self.map_projector.render(T_wall_uncorrected)
         left, right = self.robot.capture(frame)
-        T_robot_from_right = T_robot_from_left @ invert(T_right_from_left)
         uv_l = registration.predict_camera_pixels(marks, reg.T_wall_from_robot, T_robot_from_left, cam_l)
         uv_r = registration.predict_camera_pixels(marks, reg.T_wall_from_robot, T_robot_from_right, cam_r)
-        r_px = radius_m * cam_l.fx / reg.distance_m
         found_l = registration.find_marks(left, uv_l, r_px)
         found_r = registration.find_marks(right, uv_r, r_px)
         loop = registration.measure_marks(marks, found_l, found_r, cam_l, cam_r, T_right_from_left,

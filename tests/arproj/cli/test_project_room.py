@@ -51,7 +51,12 @@ def test_project_room_hands_over_across_the_corner(room_glb: Path) -> None:
     assert first["registered_on"] == 0 and second["registered_on"] == SIDE
     for cycle in (first, second):
         assert set(cycle["walls"]) == {"0", str(SIDE)} and cycle["show_map"]
-        assert all(w["shown"] and w["bound_mm"] < 10 for w in cycle["walls"].values()), cycle
+        # the wall registered on is shown; the other is judged by its own bound (from the pose's full
+        # covariance, which at 2 m / 30° may just exceed the tolerance far round the corner) and never shown
+        # beyond it
+        assert cycle["walls"][str(cycle["registered_on"])]["shown"], cycle
+        assert all(not w["shown"] or w["bound_mm"] < 10 for w in cycle["walls"].values()), cycle
+        assert all(w["shown"] or w["reasons"] for w in cycle["walls"].values()), cycle
     assert any(line.startswith(f"handover: registering on wall {SIDE}") for line in result["log"])
 
 

@@ -77,8 +77,12 @@ def test_glaring_sunlight_is_refused(station):
 
 def test_a_wrong_camera_mount_in_the_rig_file_is_refused(station):
     o = scenarios.run_scene(station, scenarios.wrong_rig_file(station, 3, np.random.default_rng(4)))
-    assert not o.show_map
-    assert o.judged and o.true_max_m > tol.REGISTRATION_TOLERANCE_M  # it would have been far off
+    assert not o.show_map and o.reasons
+    # refused either where its wall pose disagrees with the robot's prior (a fresh station: this test alone on
+    # an xdist worker) or by the gate after the estimate (the station registered again by earlier scenes) —
+    # where it was judged, it would have been far off
+    if o.judged:
+        assert o.true_max_m > tol.REGISTRATION_TOLERANCE_M
 
 
 def test_a_person_in_the_beam_never_shows_a_wrong_map(station):
