@@ -60,7 +60,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
             surface = load_range_images(str(range_images))
         with progress_bar() as bar:
-            task = bar.add_task("mapping", total=8)
+            # reading, mapping, the mesh if asked, then one step per export
+            task = bar.add_task("mapping", total=2 + (surface is not None) + len(exports.formats()))
             bar.update(task, description="reading the log")
             data = load_scan(log)
             bar.advance(task)
@@ -73,6 +74,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
                 bar.update(task, description="meshing the range images")
                 mesh = wall_mesh_from_range_images(surface[0], result.bounds, surface[1])
+                bar.advance(task)
             written = []
             with folder as tmp:  # the whole folder, then swapped in place: a kill leaves the old or the new map
                 steps = exports.export_steps(data, result, tmp, mesh, title=f"In-wall map of {log.name}",

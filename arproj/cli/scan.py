@@ -146,6 +146,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         for path in (resume, log):  # a log another scan is writing: refused before the slow set-up below
             if path is not None:
                 WriterLock(path).probe()
+        if wall is not None and resume is None:  # a wrong --wall: refused before the slow imports below
+            from scanner.wall import wall_file
+
+            wall_file(wall)
         from arproj.console import console
         from arproj.run.scan import DeviceUrls, ScanSettings, new_scan_log, resolve_wall
         from scanner.run import open_for_resume
@@ -238,12 +242,13 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                    "(inductive and AC along the test plate, three runs) with the simulator."),
     ) -> None:
         """Draw a scan log's inductive and AC readings on the wall (PNG), or the paper's figures 5 and 6."""
-        from arproj.console import console
-        from scanner.figures import plot_log, plot_paper_figures
+        from arproj.console import console, working
 
-        if paper:
-            console.print(f"wrote {plot_paper_figures(out)}")
-            return
-        if log is None:
+        if log is None and not paper:
             raise InputError("arproj scan-plot needs a scan LOG (or --paper)")
-        console.print(f"wrote {plot_log(log, out)}")
+        with working("simulating the paper's three runs and drawing figures 5 and 6" if paper else
+                     f"drawing {log}'s readings"):
+            from scanner.figures import plot_log, plot_paper_figures
+
+            written = plot_paper_figures(out) if paper else plot_log(log, out)
+        console.print(f"wrote {written}")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from arproj.console import console, err_console
+from arproj.console import console, working
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
@@ -19,10 +19,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     ) -> None:
         """Build the simulated site and write what each camera sees with a projected test pattern, the
         ground truth drawn over it, and a plan view."""
-        from arproj.sim import Site
-        from arproj.sim.pictures import write_site_pictures
+        with working("building the simulated site and rendering its pictures"):
+            from arproj.sim import Site
+            from arproj.sim.pictures import write_site_pictures
 
-        with err_console.status("building the site and rendering …"), Site.build(scene, seed=seed) as site:
-            paths = write_site_pictures(site, out)
+            with Site.build(scene, seed=seed) as site:
+                paths = write_site_pictures(site, out)
         for path in paths:
             console.print(f"wrote {path}", highlight=False)
