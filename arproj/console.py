@@ -64,6 +64,9 @@ def working(description: str) -> Iterator[Callable[[str], None]]:
     on err_console meanwhile appear above it."""
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
+    if not err_console.is_terminal:  # a log file: a spinner is noise there (and rich would end it with a blank line)
+        yield lambda text: None
+        return
     with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=err_console,
                   transient=True) as bar:
         task = bar.add_task(description, total=None)

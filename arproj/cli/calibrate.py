@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from arproj.console import console, err_console, progress_bar, track
+from arproj.console import console, err_console, progress_bar, track, working
 from calibration.defaults import DEFAULT_BOARD
 from geometry.errors import InputError
 
@@ -206,7 +206,7 @@ def live_projector_command(opts: LiveOptions, size: str, sim: bool = False, smal
     from dataclasses import replace
 
     from arproj.sim.live import SpawnedLiveSite
-    from arproj.wizard.live_run import run_live
+    from arproj.wizard.live_run import check_before_devices, run_live
 
     bar = (lambda items, description, total: track(items, description, total=total))  # noqa: E731
     if not sim:
@@ -214,7 +214,10 @@ def live_projector_command(opts: LiveOptions, size: str, sim: bool = False, smal
             raise InputError("--live needs --screen, --left and --projector (or --sim)")
         summary = run_live(replace(opts, projector_size=_parse_size(size, "--projector")), bar)
     else:
-        with SpawnedLiveSite(seed=seed, small=small) as site:
+        check_before_devices(opts, two_cameras=True)  # the simulated site has both: refused before it starts
+        with working("starting the simulated site (its own process)"):
+            site = SpawnedLiveSite(seed=seed, small=small)  # its start: until it serves its URLs
+        with site:
             u = site.urls
             truth = site.truth()
             opts = replace(opts, screen=u.screen, left=u.camera_left, right=u.camera_right, head=u.head,

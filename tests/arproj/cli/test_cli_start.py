@@ -58,20 +58,43 @@ def test_shipped_wall_names_resolve_and_unknown_ones_name_them(tmp_path: Path) -
         wall_file("nowall", "--truth")
 
 
-@pytest.mark.parametrize("args", [["map", "LOG", "--wall", "nowall"], ["project", "--truth", "nowall", "--sim"]])
+@pytest.mark.parametrize("args", [["map", "LOG", "--wall", "nowall", "--out", "OUT"],
+                                  ["project", "--truth", "nowall", "--sim"],
+                                  ["scan", "--sim", "--wall", "nowall", "--log", "OUT"],
+                                  ["demo", "--wall", "nowall", "--out", "OUT"],
+                                  ["devices", "serve", "--wall", "nowall"],
+                                  ["import-scan", "LOG", "--out", "OUT", "--wall", "nowall"]])
 def test_an_unknown_wall_is_refused_before_any_work(tmp_path: Path, args: list[str],
                                                    monkeypatch: pytest.MonkeyPatch,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
-    """Refused with exit 2 before the log is read (it does not exist here) or the simulated site is built."""
+    """Refused with exit 2 before the log is read (it does not exist here), the simulated site is built or an
+    output is written."""
     from arproj.cli import main
 
-    out = tmp_path / "map"
-    args = [str(tmp_path / "missing.db") if a == "LOG" else a for a in args]
-    if args[0] == "map":
-        args += ["--out", str(out)]
+    out = tmp_path / "out"
+    args = [str(tmp_path / "missing.db") if a == "LOG" else str(out) if a == "OUT" else a for a in args]
     monkeypatch.setattr(sys, "argv", ["arproj", *args])
     with pytest.raises(SystemExit) as done:
         main()
     assert done.value.code == 2
     assert "nowall: no such file" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_live_calibration_without_a_stereo_pair_is_refused_before_the_site_starts(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """`calibrate projector --live --sim` on a rig folder with no stereo pair (and no --stereo N): one line,
+    exit 2, and the simulated site (a process of its own, seconds to start) never started."""
+    import arproj.sim.live
+    from arproj.cli import main
+
+    def no_site(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the simulated site was started")
+
+    monkeypatch.setattr(arproj.sim.live, "SpawnedLiveSite", no_site)
+    monkeypatch.setattr(sys, "argv", ["arproj", "calibrate", "projector", "--live", "--sim", "--rig",
+                                      str(tmp_path / "rig")])
+    with pytest.raises(SystemExit) as done:
+        main()
+    assert done.value.code == 2
+    assert "no calibrated stereo pair" in capsys.readouterr().err
