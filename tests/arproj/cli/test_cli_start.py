@@ -98,3 +98,23 @@ def test_live_calibration_without_a_stereo_pair_is_refused_before_the_site_start
         main()
     assert done.value.code == 2
     assert "no calibrated stereo pair" in capsys.readouterr().err
+
+
+def test_the_shipped_scene_is_taken_by_its_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`arproj site --scene default` is the built-in scene (as without --scene); a file of that name in the
+    working directory would win, as a wall file does over a shipped wall's name."""
+    import arproj.sim
+
+    built: list[object] = []
+
+    def build(scene: object = None, seed: int = 0) -> None:
+        built.append(scene)
+        raise InputError("stopped before building")
+
+    monkeypatch.setattr(arproj.sim.Site, "build", staticmethod(build))
+    monkeypatch.chdir(tmp_path)
+    for _ in range(2):
+        done = CliRunner().invoke(app, ["site", "--scene", "default", "--out", str(tmp_path / "pictures")])
+        assert done.exit_code == 1 and isinstance(done.exception, InputError)
+        Path("default").write_text("room: {}\n")
+    assert built == [None, Path("default")]
