@@ -72,20 +72,23 @@ def stereo_command(left: str, right: str, board_spec: str, out: Path, model: str
     board = parse_board(board_spec)
     images = detect_stereo_set(left, right, board, track=lambda it, d, n: track(it, d, total=n))
     _warn_no_board(images.no_board, board)
-    try:
-        calib = calibrate_stereo(images.left, images.right, board, model=model)
-    except InputError as err:
-        if images.no_board:
-            raise InputError(f"{err.message} (no board in: {', '.join(images.no_board)})", err.hint) from None
-        raise
-    _refuse_poor(stereo_quality_problems(calib), out, accept_poor)
-    rig = Rig(intrinsics={"camera_left": calib.left, "camera_right": calib.right},
-              poses={"T_camera_right_from_camera_left": calib.T_right_from_left},
-              quality={"stereo": calib.quality() | {"board": board_spec, "images_without_board": images.no_board}})
-    with folder as tmp:
-        rig.save(tmp)
-        plot_stereo_coverage(calib, [lv for lv in images.left if lv is not None],
-                             [rv for rv in images.right if rv is not None], tmp / "stereo_coverage.png")
+    with working("calibrating each camera, then the pair (joint refinement)") as step:
+        try:
+            calib = calibrate_stereo(images.left, images.right, board, model=model)
+        except InputError as err:
+            if images.no_board:
+                raise InputError(f"{err.message} (no board in: {', '.join(images.no_board)})", err.hint) from None
+            raise
+        _refuse_poor(stereo_quality_problems(calib), out, accept_poor)
+        rig = Rig(intrinsics={"camera_left": calib.left, "camera_right": calib.right},
+                  poses={"T_camera_right_from_camera_left": calib.T_right_from_left},
+                  quality={"stereo": calib.quality() | {"board": board_spec, "images_without_board":
+                                                        images.no_board}})
+        step(f"writing {out}")
+        with folder as tmp:
+            rig.save(tmp)
+            plot_stereo_coverage(calib, [lv for lv in images.left if lv is not None],
+                                 [rv for rv in images.right if rv is not None], tmp / "stereo_coverage.png")
     figures = calib.quality()
     summary = {
         "out": str(out),
