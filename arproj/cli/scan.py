@@ -146,10 +146,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         for path in (resume, log):  # a log another scan is writing: refused before the slow set-up below
             if path is not None:
                 WriterLock(path).probe()
-        if wall is not None and resume is None:  # a wrong --wall: refused before the slow imports below
+        if wall is not None:  # a shipped wall's name or a file; a wrong one refused before the slow imports below
             from scanner.wall import wall_file
 
-            wall_file(wall)
+            wall_path = wall_file(wall)
         from arproj.console import console
         from arproj.run.scan import DeviceUrls, ScanSettings, new_scan_log, resolve_wall
         from scanner.run import open_for_resume
@@ -188,7 +188,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         if resume is not None:
             if log is not None:
                 raise InputError("give either --resume LOG or --log LOG, not both")
-            scan_log, the_wall = open_for_resume(resume, wall)
+            scan_log, the_wall = open_for_resume(resume, wall_path if wall is not None else None)
             try:
                 settings = ScanSettings.from_log(scan_log.meta, resume, on_devices=urls is not None)
             except BaseException:

@@ -118,3 +118,17 @@ def test_the_shipped_scene_is_taken_by_its_name(tmp_path: Path, monkeypatch: pyt
         assert done.exit_code == 1 and isinstance(done.exception, InputError)
         Path("default").write_text("room: {}\n")
     assert built == [None, Path("default")]
+
+
+def test_resume_takes_the_shipped_wall_by_its_name(tmp_path: Path) -> None:
+    """`arproj scan --resume LOG --wall NAME` resolves NAME as `--log` does (it was refused as "no such wall
+    file"); the wall is still checked against the log's."""
+    log = tmp_path / "scan.db"
+    done = CliRunner().invoke(app, ["scan", "--sim", "--fast", "--wall", "small_test_wall", "--log", str(log),
+                                    "--no-site"])
+    assert done.exit_code == 0, done.output
+    done = CliRunner().invoke(app, ["scan", "--resume", str(log), "--wall", "small_test_wall", "--no-site"])
+    assert done.exit_code == 0, done.output
+    assert "scan already complete" in done.output
+    done = CliRunner().invoke(app, ["scan", "--resume", str(log), "--wall", "paper_test_plate", "--no-site"])
+    assert done.exit_code == 1 and "from another wall" in str(done.exception)
