@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import TYPE_CHECKING, TypeVar
 
 from rich.console import Console
@@ -54,3 +55,19 @@ def track(items: Iterable[T], description: str, total: int | None = None) -> Ite
     joins a refresh thread then deadlocks when it happens inside rich's own lock (seen in calibrate camera)."""
     with progress_bar(auto_refresh=False) as bar:
         yield from bar.track(items, total=total, description=description)
+
+
+@contextlib.contextmanager
+def working(description: str) -> Iterator[Callable[[str], None]]:
+    """A step with nothing to count (building a site, a registration): one line on stderr with a spinner, what
+    runs and for how long, gone when it ends. Yields a function that says which part runs now; lines printed
+    on err_console meanwhile appear above it."""
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    if not err_console.is_terminal:  # a log file: a spinner is noise there (and rich would end it with a blank line)
+        yield lambda text: None
+        return
+    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=err_console,
+                  transient=True) as bar:
+        task = bar.add_task(description, total=None)
+        yield lambda text: bar.update(task, description=text)

@@ -36,7 +36,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from arproj.console import console, err_console, progress_bar
+from arproj.console import console, err_console, progress_bar, working
 from arproj.session.tolerances import DIN_ZONE_WORDS
 from geometry.errors import InputError
 from geometry.plain import plain
@@ -703,7 +703,7 @@ def run_demo(options: DemoOptions) -> DemoContext:
             err_console.print(f"[bold]── {number}/{len(STAGES)} {name}[/]", highlight=False)
             start = time.perf_counter()
             try:
-                with _stdout_to_stderr():
+                with _stdout_to_stderr(), working(f"{number}/{len(STAGES)} {name}"):  # bars inside it nest
                     stage(ctx)
             except InputError:
                 raise

@@ -27,9 +27,10 @@ INCIDENCES_DEG = (0.0, 30.0, 60.0)
 TARGET_MEAN_MM = {2.0: 2.0, 4.0: 4.0}
 LATENCY_TARGET_MS = 50.0
 SCENARIOS_FULL = 1000   # judged rendered scenes
-SCENARIOS_QUICK = 24  # 4 per kind (6 kinds): quick is indicative only, judged on the full run
+SCENARIOS_QUICK = 12  # 2 per kind (6 kinds): quick is indicative only, judged on the full run
 TUNING_FULL = 300       # tuning scenes (other seeds): the closed-loop reserve's fit
-TUNING_QUICK = 12
+TUNING_QUICK = 6  # one per kind
+STEREO_POSES_QUICK = 10  # --quick: the wizard's stereo step on 10 board pairs (its default 24), as demo --quick
 RESERVE_QUANTILE = 99.0  # the reserve: this percentile of the worst mark on fine tuning scenes …
 RESERVE_STEP_M = 0.0005  # … rounded up to this
 FALSE_ALARM_TARGET = 0.02
@@ -45,8 +46,9 @@ CORNER_AIM_M = 0.45           # the beam's centre this far from the corner, on w
 CORNER_TARGET_MM = 2.0
 
 
-def _calibrated_rig(seed: int, folder: Path) -> tuple[object, str]:
-    """Rig from the calibration wizard's simulated procedure (not the site's truth)."""
+def _calibrated_rig(seed: int, folder: Path, stereo_poses: int | None = None) -> tuple[object, str]:
+    """Rig from the calibration wizard's simulated procedure (not the site's truth); stereo_poses: its stereo
+    step's board pairs (None: the wizard's default)."""
     from geometry.rig import Rig
 
     try:
@@ -58,7 +60,7 @@ def _calibrated_rig(seed: int, folder: Path) -> tuple[object, str]:
 
     try:
         with contextlib.redirect_stdout(sys.stderr):  # the wizard reports on stdout; --json must stay clean
-            run_wizard(folder, sim=True, seed=seed)
+            run_wizard(folder, sim=True, seed=seed, stereo_poses=stereo_poses)
         return Rig.load(folder), "arproj calibrate --sim (calibration wizard, simulated procedure)"
     except Exception as err:  # another package's failure must not hide this benchmark's other figures
         return None, f"calibration wizard failed ({type(err).__name__}: {str(err)[:120]})"
@@ -187,7 +189,7 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
     ctx = create_context()
     with tempfile.TemporaryDirectory(prefix="arproj-bench-projection-") as tmp:
         err_console.print("bench projection: calibrating the simulated robot (calibration wizard, --sim) …")
-        rig, rig_source = _calibrated_rig(seed, Path(tmp) / "rig")
+        rig, rig_source = _calibrated_rig(seed, Path(tmp) / "rig", STEREO_POSES_QUICK if quick else None)
         if rig is None:
             notes.append(f"no calibrated rig ({rig_source}): only the robot's DESIGN values were used as the rig")
     wall = random_wall(seed, width_m=WALL_SIZE_M[0], height_m=WALL_SIZE_M[1], n_pipes=8, n_cables=10)

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from arproj.console import console, err_console, progress_bar, track
+from arproj.console import console, err_console, progress_bar, track, working
 from calibration.defaults import DEFAULT_BOARD
 from geometry.errors import InputError
 
@@ -72,20 +72,23 @@ def stereo_command(left: str, right: str, board_spec: str, out: Path, model: str
     board = parse_board(board_spec)
     images = detect_stereo_set(left, right, board, track=lambda it, d, n: track(it, d, total=n))
     _warn_no_board(images.no_board, board)
-    try:
-        calib = calibrate_stereo(images.left, images.right, board, model=model)
-    except InputError as err:
-        if images.no_board:
-            raise InputError(f"{err.message} (no board in: {', '.join(images.no_board)})", err.hint) from None
-        raise
-    _refuse_poor(stereo_quality_problems(calib), out, accept_poor)
-    rig = Rig(intrinsics={"camera_left": calib.left, "camera_right": calib.right},
-              poses={"T_camera_right_from_camera_left": calib.T_right_from_left},
-              quality={"stereo": calib.quality() | {"board": board_spec, "images_without_board": images.no_board}})
-    with folder as tmp:
-        rig.save(tmp)
-        plot_stereo_coverage(calib, [lv for lv in images.left if lv is not None],
-                             [rv for rv in images.right if rv is not None], tmp / "stereo_coverage.png")
+    with working("calibrating each camera, then the pair (joint refinement)") as step:
+        try:
+            calib = calibrate_stereo(images.left, images.right, board, model=model)
+        except InputError as err:
+            if images.no_board:
+                raise InputError(f"{err.message} (no board in: {', '.join(images.no_board)})", err.hint) from None
+            raise
+        _refuse_poor(stereo_quality_problems(calib), out, accept_poor)
+        rig = Rig(intrinsics={"camera_left": calib.left, "camera_right": calib.right},
+                  poses={"T_camera_right_from_camera_left": calib.T_right_from_left},
+                  quality={"stereo": calib.quality() | {"board": board_spec, "images_without_board":
+                                                        images.no_board}})
+        step(f"writing {out}")
+        with folder as tmp:
+            rig.save(tmp)
+            plot_stereo_coverage(calib, [lv for lv in images.left if lv is not None],
+                                 [rv for rv in images.right if rv is not None], tmp / "stereo_coverage.png")
     figures = calib.quality()
     summary = {
         "out": str(out),
@@ -206,7 +209,7 @@ def live_projector_command(opts: LiveOptions, size: str, sim: bool = False, smal
     from dataclasses import replace
 
     from arproj.sim.live import SpawnedLiveSite
-    from arproj.wizard.live_run import run_live
+    from arproj.wizard.live_run import check_before_devices, run_live
 
     bar = (lambda items, description, total: track(items, description, total=total))  # noqa: E731
     if not sim:
@@ -214,7 +217,10 @@ def live_projector_command(opts: LiveOptions, size: str, sim: bool = False, smal
             raise InputError("--live needs --screen, --left and --projector (or --sim)")
         summary = run_live(replace(opts, projector_size=_parse_size(size, "--projector")), bar)
     else:
-        with SpawnedLiveSite(seed=seed, small=small) as site:
+        check_before_devices(opts, two_cameras=True)  # the simulated site has both: refused before it starts
+        with working("starting the simulated site (its own process)"):
+            site = SpawnedLiveSite(seed=seed, small=small)  # its start: until it serves its URLs
+        with site:
             u = site.urls
             truth = site.truth()
             opts = replace(opts, screen=u.screen, left=u.camera_left, right=u.camera_right, head=u.head,

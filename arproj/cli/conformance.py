@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import typer
 
-from arproj.console import console
+from arproj.console import console, working
 
 DEVICES = ("scanner",)
 
@@ -34,22 +34,23 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             raise InputError("devices-check scanner needs a URL or --sim (not both)")
         if not timeout_s > 0:
             raise InputError(f"--timeout {timeout_s}: must be a positive number of seconds")
-        if sim:
-            from devices.sim import DeviceServer
-            from scanner.plan import DriveConfig
-            from scanner.sensor_model import SensorConfig
-            from scanner.sim.devices import WallScannerSim
-            from scanner.sim.world import SimWorld
-            from scanner.wall import load_wall, shipped_walls
+        with working(f"checking {'the simulated wall scanner' if sim else url}"):
+            if sim:
+                from devices.sim import DeviceServer
+                from scanner.plan import DriveConfig
+                from scanner.sensor_model import SensorConfig
+                from scanner.sim.devices import WallScannerSim
+                from scanner.sim.world import SimWorld
+                from scanner.wall import load_wall, shipped_walls
 
-            world = SimWorld(load_wall(shipped_walls()["small_test_wall"]), SensorConfig(), DriveConfig(), 0)
-            with DeviceServer(WallScannerSim(world)) as server:
-                results = run_checks(server.url, timeout_s)
-            where = f"the simulated wall scanner ({server.url})"
-        else:
-            assert url is not None
-            results = run_checks(url, timeout_s)
-            where = url
+                world = SimWorld(load_wall(shipped_walls()["small_test_wall"]), SensorConfig(), DriveConfig(), 0)
+                with DeviceServer(WallScannerSim(world)) as server:
+                    results = run_checks(server.url, timeout_s)
+                where = f"the simulated wall scanner ({server.url})"
+            else:
+                assert url is not None
+                results = run_checks(url, timeout_s)
+                where = url
         for result in results:
             console.print(result.line(), highlight=False, soft_wrap=True)
         failed = [r.name for r in results if not r.ok]

@@ -26,6 +26,9 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         """Run arproj end to end on the simulated site (scan → map → mesh → calibrate → wall pose → pre-warp →
         photograph) and write report.html with pictures and the accuracy against the truth."""
         from arproj.console import Interrupted
+        from scanner.wall import wall_file
+
+        wall_file(wall)  # a wrong --wall: refused at once, before the demo's imports (OpenCV, GL)
         from arproj.demo import DemoOptions, print_summary, run_demo
 
         try:

@@ -40,15 +40,18 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     ) -> None:
         """Serve the simulators of the drives, the wall scanner, the robot base, the 2-D laser and the pan/tilt
         head on 127.0.0.1 and print their URLs; runs until Ctrl-C (or SIGTERM): exit status 130."""
+        from scanner.wall import wall_file
+
+        if not 0.0 <= faults <= 0.5:
+            raise InputError(f"--faults = {faults}: must be a probability between 0 and 0.5")
+        if distance <= 0:
+            raise InputError(f"--distance = {distance}: must be a positive distance in metres")
+        wall_file(wall)  # a wrong --wall: refused before the slow imports below
         from arproj.console import console
         from arproj.run.devices import ServeRequest, device_urls, serve_devices, write_urls
         from arproj.run.scan import resolve_wall
 
-        if not 0.0 <= faults <= 0.5:
-            raise InputError(f"--faults = {faults}: must be a probability between 0 and 0.5")
         the_wall, path = resolve_wall(wall)
-        if distance <= 0:
-            raise InputError(f"--distance = {distance}: must be a positive distance in metres")
         request = ServeRequest(the_wall, str(path), seed, faults, projection, distance)
         with serve_devices(request) as served:
             found = device_urls(served)

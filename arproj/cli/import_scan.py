@@ -32,6 +32,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         """Bring a recorded scan in as a scan log: every sample with its position and readings, the format,
         cell size and channels in the log's meta. Map it with `arproj map LOG --out DIR`."""
         from geometry.errors import InputError
+
+        if wall is not None:  # a wrong --wall: refused before the slow imports below
+            from scanner.wall import wall_file
+
+            wall_file(wall)
         from scanner.recorded import FORMATS, import_table
 
         if fmt is not None and fmt not in FORMATS:

@@ -78,7 +78,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
             surface = load_range_images(str(range_images))
         with progress_bar() as bar:
-            task = bar.add_task("mapping", total=8)
+            # reading, mapping, the mesh if asked, then one step per export
+            task = bar.add_task("mapping", total=2 + (surface is not None) + len(exports.formats()))
             bar.update(task, description="reading the log")
             data = load_scan(log)
             bar.advance(task)
@@ -94,6 +95,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                 mesh = wall_mesh_from_range_images(surface[0], result.bounds, surface[1], merged=merged)
                 if surface[1] is not None and other_walls_in_mesh(merged, surface[1], surface[0][0][2][:3, 3]):
                     room_mesh = merged  # the range images see another wall: a room, in their frame
+                bar.advance(task)
             written = []
             with folder as tmp:  # the whole folder, then swapped in place: a kill leaves the old or the new map
                 steps = exports.export_steps(data, result, tmp, mesh, title=f"In-wall map of {log.name}",

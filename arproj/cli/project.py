@@ -18,7 +18,7 @@ from pathlib import Path
 
 import typer
 
-from arproj.console import console, err_console
+from arproj.console import console, err_console, working
 from geometry.errors import InputError
 
 
@@ -129,7 +129,17 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             head_fault=head_fault, commands=_stdin_lines() if interactive else None, site=site,
             site_key=wall_key if site is not None else None, record=record,
             view=view, room=room, room_aims=room_aims)
-        result = run_session(options, say=lambda text: err_console.print(text, highlight=False))
+        if interactive:  # the terminal is the user's after the first cycle: no spinner under their typing
+            err_console.print("projection session: starting the robot, finding the wall …", highlight=False)
+            result = run_session(options, say=lambda text: err_console.print(text, highlight=False))
+        else:
+            with working("projection session: starting the robot, finding the wall, rendering") as step:
+                def say(text: str) -> None:
+                    err_console.print(text, highlight=False)
+                    if text.startswith("cycle "):  # a cycle is done: the next one runs
+                        step("projection session: next cycle (checking the pose, rendering)")
+
+                result = run_session(options, say=say)
         if as_json:
             print(json.dumps(result, indent=2))
         else:

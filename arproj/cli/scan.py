@@ -146,6 +146,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         for path in (resume, log):  # a log another scan is writing: refused before the slow set-up below
             if path is not None:
                 WriterLock(path).probe()
+        if wall is not None:  # a shipped wall's name or a file; a wrong one refused before the slow imports below
+            from scanner.wall import wall_file
+
+            wall_path = wall_file(wall)
         from arproj.console import console
         from arproj.run.scan import DeviceUrls, ScanSettings, new_scan_log, resolve_wall
         from scanner.run import open_for_resume
@@ -184,7 +188,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         if resume is not None:
             if log is not None:
                 raise InputError("give either --resume LOG or --log LOG, not both")
-            scan_log, the_wall = open_for_resume(resume, wall)
+            scan_log, the_wall = open_for_resume(resume, wall_path if wall is not None else None)
             try:
                 settings = ScanSettings.from_log(scan_log.meta, resume, on_devices=urls is not None)
             except BaseException:
@@ -238,12 +242,13 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                    "(inductive and AC along the test plate, three runs) with the simulator."),
     ) -> None:
         """Draw a scan log's inductive and AC readings on the wall (PNG), or the paper's figures 5 and 6."""
-        from arproj.console import console
-        from scanner.figures import plot_log, plot_paper_figures
+        from arproj.console import console, working
 
-        if paper:
-            console.print(f"wrote {plot_paper_figures(out)}")
-            return
-        if log is None:
+        if log is None and not paper:
             raise InputError("arproj scan-plot needs a scan LOG (or --paper)")
-        console.print(f"wrote {plot_log(log, out)}")
+        with working("simulating the paper's three runs and drawing figures 5 and 6" if paper else
+                     f"drawing {log}'s readings"):
+            from scanner.figures import plot_log, plot_paper_figures
+
+            written = plot_paper_figures(out) if paper else plot_log(log, out)
+        console.print(f"wrote {written}")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import typer
 
-from arproj.console import console
+from arproj.console import console, working
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
@@ -35,11 +35,13 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
     ) -> None:
         """Measure the wall's pose once from the projected checker pattern seen by both cameras."""
-        from arproj.run.wallpose import WallposeSettings, run_wallpose
+        with working("wall pose: " + ("building the simulated site, " if sim else "")
+                     + "detecting the pattern in both photos, fitting the plane"):
+            from arproj.run.wallpose import WallposeSettings, run_wallpose
 
-        result = run_wallpose(WallposeSettings(sim=sim, distance=distance, incidence=incidence, seed=seed, along=along,
-                                               rig=rig, head=head, left=left, right=right, pattern_out=pattern_out,
-                                               picture=picture))
+            result = run_wallpose(WallposeSettings(sim=sim, distance=distance, incidence=incidence, seed=seed,
+                                                   along=along, rig=rig, head=head, left=left, right=right,
+                                                   pattern_out=pattern_out, picture=picture))
         if as_json:
             print(json.dumps(result, indent=2))
             return

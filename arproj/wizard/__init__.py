@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from arproj.console import console, track
+from arproj.console import console, track, working
 from calibration.boards import parse_board
 from calibration.defaults import DEFAULT_BOARD
 from geometry.errors import InputError
@@ -99,22 +99,23 @@ def run_wizard(out: Path, sim: bool = False, restart: bool = False, seed: int = 
         while (step := next_step(state)) is not None:
             console.print(f"[bold]step {STEPS.index(step) + 1}/{len(STEPS)}: {step}[/]", highlight=False)
             started = time.time()
-            rig = Rig.load(out) if (out / RIG_FILE).exists() else None
-            if step == "stereo":
-                result, rig = steps.step_stereo(station, out, STEREO_BOARD,
-                                                stereo_poses or steps.STEREO_POSES)
-                result["truth_errors"] = steps.stereo_truth_errors(rig, station.truth)
-            elif step == "projector":
-                result, rig = steps.step_projector(station, _need(rig, out), out, bar)
-                result["truth_errors"] = steps.projector_truth_errors(rig, station.truth)
-            elif step == "head":
-                measurements = state["steps"]["projector"]["measurements"]
-                result, rig, _ = steps.step_head(_need(rig, out), out, measurements,
-                                              station.T_robot_from_camera_left_design)
-                result["truth_errors"] = steps.head_truth_errors(station, rig)
-            else:
-                result = steps.step_validation(station, _need(rig, out), out, bar)
-                result["truth_errors"] = steps.validation_truth_errors(station, _need(Rig.load(out), out))
+            with working(f"step {STEPS.index(step) + 1}/{len(STEPS)}: {step}"):  # bars inside it nest
+                rig = Rig.load(out) if (out / RIG_FILE).exists() else None
+                if step == "stereo":
+                    result, rig = steps.step_stereo(station, out, STEREO_BOARD,
+                                                    stereo_poses or steps.STEREO_POSES)
+                    result["truth_errors"] = steps.stereo_truth_errors(rig, station.truth)
+                elif step == "projector":
+                    result, rig = steps.step_projector(station, _need(rig, out), out, bar)
+                    result["truth_errors"] = steps.projector_truth_errors(rig, station.truth)
+                elif step == "head":
+                    measurements = state["steps"]["projector"]["measurements"]
+                    result, rig, _ = steps.step_head(_need(rig, out), out, measurements,
+                                                  station.T_robot_from_camera_left_design)
+                    result["truth_errors"] = steps.head_truth_errors(station, rig)
+                else:
+                    result = steps.step_validation(station, _need(rig, out), out, bar)
+                    result["truth_errors"] = steps.validation_truth_errors(station, _need(Rig.load(out), out))
             result["status"] = "done"
             result["seconds"] = round(time.time() - started, 1)
             state["steps"][step] = result

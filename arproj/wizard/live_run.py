@@ -60,13 +60,25 @@ class LiveOptions:
     view: str | None = None  # --view live | FILE.rrd: captures and coverage in Rerun (arproj.run.view)
 
 
+def check_before_devices(opts: LiveOptions, two_cameras: bool) -> tuple[Any, Rig]:
+    """What the live calibration refuses without opening a device (or starting the simulated site): the board,
+    the rig folder, and for two cameras a stereo pair (from the rig, or --stereo N). Returns the board and rig."""
+    board = parse_board(opts.board)
+    rig = Rig.load(opts.rig) if (opts.rig / RIG_FILE).exists() else Rig()
+    if opts.stereo_poses and not two_cameras:
+        raise InputError("--stereo calibrates the stereo pair", "give --right CAM too")
+    if two_cameras and not opts.stereo_poses and not {"camera_left", "camera_right"} <= set(rig.intrinsics):
+        raise InputError(f"{opts.rig / RIG_FILE}: no calibrated stereo pair (camera_left, camera_right)",
+                         "run `arproj calibrate stereo … --out RIG` first, or add --stereo N")
+    return board, rig
+
+
 def run_live(opts: LiveOptions, track: Track, design_mount: np.ndarray | None = None,
              truth: dict | None = None) -> dict[str, Any]:
     """Run the live calibration; returns the summary (figures with their 95 % bounds; vs truth if given)."""
-    board = parse_board(opts.board)
+    board, rig = check_before_devices(opts, two_cameras=opts.right is not None)
     mover: BoardMover = UrlMover(opts.mover) if opts.mover else PersonMover()
     rig_dir = opts.rig
-    rig = Rig.load(rig_dir) if (rig_dir / RIG_FILE).exists() else Rig()
     if design_mount is not None and MOUNT_POSE not in rig.poses:
         rig.poses[MOUNT_POSE] = np.asarray(design_mount, dtype=np.float64)
     summary: dict[str, Any] = {"rig": str(rig_dir)}
@@ -118,9 +130,7 @@ def _watch(station: LiveStation, opts: LiveOptions, rig_dir: Path, stack: ExitSt
 
 def _calibrate(station: LiveStation, opts: LiveOptions, board: Any, rig: Rig, rig_dir: Path, track: Track,
                summary: dict[str, Any], truth: dict | None) -> None:
-    if opts.stereo_poses:
-        if opts.right is None:
-            raise InputError("--stereo calibrates the stereo pair", "give --right CAM too")
+    if opts.stereo_poses:  # with a right camera: check_before_devices
         result, stereo_rig = step_stereo(station, rig_dir, opts.board, opts.stereo_poses)
         rig.intrinsics.update(stereo_rig.intrinsics)
         rig.poses.update(stereo_rig.poses)
@@ -144,9 +154,6 @@ def _calibrate(station: LiveStation, opts: LiveOptions, board: Any, rig: Rig, ri
         if truth is not None:
             summary["truth"] = truth_check(truth, projector=calib)
         return
-    if "camera_left" not in rig.intrinsics or "camera_right" not in rig.intrinsics:
-        raise InputError(f"{rig_dir / RIG_FILE}: no calibrated stereo pair (camera_left, camera_right)",
-                         "run `arproj calibrate stereo … --out RIG` first, or add --stereo N")
     fit_angles, check_angles = pan_tilt_plan(station.aim_deg, opts.head_poses)
     result, rig, calib, samples = step_projector_stereo(station, rig, rig_dir, fit_angles, track)
     summary["projector"] = result["quality"]

@@ -126,3 +126,13 @@ def test_a_shipped_wall_name_is_the_truth_of_wall(maps: dict[str, Path], tmp_pat
                                     "small_test_wall"])
     assert done.exit_code == 0, done.output
     assert "against small_test_wall: recall 100.0% (2/2)" in done.output
+
+
+def test_the_progress_bar_ends_at_its_total(maps: dict[str, Path], tmp_path: Path) -> None:
+    """The bar counts the steps there are (reading, mapping, one per export): it ends at N/N, not 9/8."""
+    import re
+
+    done = CliRunner().invoke(app, ["map", str(maps["log"]), "--out", str(tmp_path / "map")])
+    assert done.exit_code == 0, done.output
+    counts = re.findall(r"(\d+)/(\d+) ", done.output)
+    assert counts and counts[-1][0] == counts[-1][1], done.output
