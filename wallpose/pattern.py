@@ -209,7 +209,7 @@ def choose_pattern(views: object, distance_m: float, incidence_deg: float = 0.0,
         ratios = np.minimum(ratios, np.minimum(du, dv))
     mask = visible.reshape(gy.shape)
     if mask.sum() < 4:
-        raise InputError(f"at {distance_m} m and {incidence_deg}° the cameras do not see the projector's image",
+        raise InputError(f"at {distance_m:.2f} m and {incidence_deg:.0f}° the cameras do not see the projector's image",
                          "check the rig calibration and the head angles")
     r0, r1, c0, c1 = _largest_rectangle(mask)
     margin_x, margin_y = limits.PATTERN_MARGIN_FRACTION * w, limits.PATTERN_MARGIN_FRACTION * h

@@ -59,7 +59,8 @@ def test_the_session_bag_holds_tf_camera_info_frames_and_gate(tmp_path, monkeypa
         return decision
 
     monkeypatch.setattr(session_module.ProjectionSession, "update", update)
-    result = run_session(SessionOptions(truth=shipped_walls()["small_test_wall"], sim=True, cycles=1,
+    # a placement whose map is shown (the closed loop's marks are recorded): the demo wall from 2 m
+    result = run_session(SessionOptions(truth=shipped_walls()["demo_brick_wall"], sim=True, cycles=1, distance=2.0,
                                         record=tmp_path / "s.mcap", view=str(tmp_path / "s.rrd")),
                          say=lambda _: None)
     assert (tmp_path / "metadata.yaml").is_file()
