@@ -68,8 +68,10 @@ DISPLAY_LATENCY_S = 0.05  # a beamer shows a frame a little after it was sent
 STREAM_SNDBUF_BYTES = 16384  # small: a stalled reader finds at most about one frame queued
 JPEG_QUALITY = 95
 HEAD_SYNC_S = 0.01  # how often the worker follows the head simulator's physical angles
-MOUNT_ERROR_DEG = 0.5  # the stereo pair as mounted is off its drawing by this (σ per axis) ...
-MOUNT_ERROR_M = 0.005  # ... and this: what the mount calibration has to find
+# The stereo pair as mounted is off its drawing by this (σ per axis, in the robot frame) and this: what the mount
+# calibration has to find; the build tolerance it assumes (calibration.laser_mount.DESIGN_SIGMA_*) is the same.
+MOUNT_ERROR_DEG = 0.5
+MOUNT_ERROR_M = 0.005
 SMALL = {"cameras": {"width": 640, "height": 400}, "projector": {"width": 320, "height": 200}}
 BOARD = DEFAULT_BOARD  # the printed board the site's person holds (the one the wizard asks for)
 PANEL_HEIGHT_M = 1.5  # the mount plan's panel: the board printed at the top of a tall panel on the floor

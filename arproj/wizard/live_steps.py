@@ -27,7 +27,9 @@ from calibration.laser_mount import (
     CHI2_3_95,
     MountFit,
     board_plane_view,
+    bounds_95,
     calibrate_mount,
+    design_covariance,
     mount_errors,
     within_bound,
 )
@@ -58,8 +60,6 @@ ROLL = 2  # the joint a Pelco-D pan/tilt head does not have
 OFF_WALL_WARN_SHARE = 0.05
 STEREO_DRAWS = 24  # draws of the stereo pair from its covariance, each re-triangulated and the projector refitted
 STEREO_DRAW_SEED = 18
-# A mount is drawn and built to about this (95 %): a calibrated mount less certain than that is not adopted.
-MOUNT_DESIGN_TOLERANCE = {"rotation_deg": 1.0, "position_mm": 10.0}
 
 
 def pan_tilt_plan(aim_deg: NDArray[np.float64], n_fit: int | None = None
@@ -226,12 +226,13 @@ def step_mount(station: LiveStation, rig: Rig, out: Path, board: Board, n_poses:
         scans.append(scan)
     fit = calibrate_mount(views, scans, T_robot_from_camera_left_design)
     bounds = fit.bounds_95()
-    adopted = all(bounds[k] <= MOUNT_DESIGN_TOLERANCE[k] for k in bounds)
+    design = {k: round(v, 4) for k, v in bounds_95(design_covariance(T_robot_from_camera_left_design)).items()}
+    adopted = all(bounds[k] <= design[k] for k in bounds)  # the fit starts from the design: only if it gained
     if adopted:
         rig.poses["T_robot_from_camera_left"] = fit.T_robot_from_camera_left
-    note = {"adopted": adopted, "design_tolerance_95": MOUNT_DESIGN_TOLERANCE, "poses_without_board": missed}
+    note = {"adopted": adopted, "design_tolerance_95": design, "poses_without_board": missed}
     rig.quality["mount"] = {k: v for k, v in fit.quality().items() if k != "covariance"} | note | {
-        "method": "laser and board (Zhang & Pless)"}
+        "method": "laser and board (Zhang & Pless), the design value as prior"}
     rig.save(out)
     return {"quality": fit.quality() | note}, fit
 

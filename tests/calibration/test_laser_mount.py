@@ -31,17 +31,22 @@ def _panel_views(T_robot_from_camera: np.ndarray, rng: np.random.Generator, n: i
     return views, scans
 
 
-def test_mount_within_its_bound_and_outliers_dropped() -> None:
+def test_mount_within_its_bound_better_than_the_design_and_outliers_dropped() -> None:
     T_true = look_at([0.15, 0.1, 1.0], [1.15, 0.1, 1.0 + np.tan(np.radians(10))])
     design = T_true @ make_pose(rotation_about([1, 0, 0], np.radians(0.5)), [0.005, 0.0, 0.003])
-    inside = 0
+    design_rot, design_pos = (np.linalg.norm(e) for e in mount_errors(design, T_true))
+    inside, rot_errors, pos_errors = 0, [], []
     for seed in range(20):
         views, scans = _panel_views(T_true, np.random.default_rng(seed))
         fit = calibrate_mount(views, scans, design)
         rot, pos = mount_errors(fit.T_robot_from_camera_left, T_true)
         inside += within_bound(rot, fit.covariance[:3, :3]) and within_bound(pos, fit.covariance[3:, 3:])
+        rot_errors.append(np.linalg.norm(rot))
+        pos_errors.append(np.linalg.norm(pos))
         assert all(n < 120 for n in fit.points_per_view)  # the outlier is gone
         assert 0.008 < fit.rms_m < 0.012
-    # Both 95 % ellipsoids would hold in 18 of 20; measured 13: the bound is about 1.5x too small in χ² (an open
-    # gap, in the report), so this asserts only that it is not far off.
-    assert inside >= 12
+    # Both 95 % ellipsoids hold in about 18 of 20 (measured 20 with the design value as prior; the laser alone
+    # held in 13 and its errors were 2-4x the design value's: its one horizontal line leaves pitch and height
+    # weakly fixed).
+    assert inside >= 17
+    assert np.mean(rot_errors) < 0.6 * design_rot and np.mean(pos_errors) < 0.8 * design_pos
