@@ -111,10 +111,15 @@ def mount_errors(T_est: NDArray[np.float64], T_true: NDArray[np.float64]) -> tup
     return rotation_vector(T_est[:3, :3] @ T_true[:3, :3].T), T_est[:3, 3] - T_true[:3, 3]
 
 
+def share_of_bound(error: NDArray[np.float64], covariance: NDArray[np.float64]) -> float:
+    """A 3-vector error in units of its 95 % ellipsoid: √(eᵀ Σ⁻¹ e / χ²₃,₀.₉₅); 1 on the ellipsoid's surface."""
+    e = np.asarray(error, dtype=np.float64)
+    return float(np.sqrt(max(float(e @ np.linalg.pinv(covariance) @ e), 0.0) / CHI2_3_95))
+
+
 def within_bound(error: NDArray[np.float64], covariance: NDArray[np.float64]) -> bool:
     """Whether a 3-vector error lies inside the 95 % ellipsoid of its covariance (Mahalanobis vs χ²₃)."""
-    e = np.asarray(error, dtype=np.float64)
-    return float(e @ np.linalg.pinv(covariance) @ e) <= CHI2_3_95
+    return share_of_bound(error, covariance) <= 1.0
 
 
 def _residuals(params: NDArray[np.float64], T0: NDArray[np.float64], planes: list[NDArray[np.float64]],

@@ -31,7 +31,7 @@ from calibration.laser_mount import (
     calibrate_mount,
     design_covariance,
     mount_errors,
-    within_bound,
+    share_of_bound,
 )
 from calibration.projector import (
     BoardCaptures,
@@ -243,6 +243,12 @@ def _truth_intrinsics(d: dict) -> Intrinsics:
     return Intrinsics(d["fx"], d["fy"], d["cx"], d["cy"], d["width"], d["height"], tuple(d["dist"]))
 
 
+def _check(error: float, bound: float, unit: str, share: float, **extra: float) -> dict[str, Any]:
+    """One truth check: |error|, its reported 95 % bound, and the error in units of that bound (`share`: |e| / bound
+    for a scalar, the Mahalanobis distance over √χ²₃,₀.₉₅ for a vector; within when ≤ 1)."""
+    return {"error": error, "bound": bound, "unit": unit, "share_of_bound": share, "within": share <= 1.0} | extra
+
+
 def truth_check(truth: dict, projector: ProjectorCalibration | None = None, rig: Rig | None = None,
                 head: dict | None = None, mount: MountFit | None = None) -> dict[str, dict[str, Any]]:
     """Each recovered quantity: its error against the truth, its 95 % bound and whether the error is within.
@@ -257,7 +263,7 @@ def truth_check(truth: dict, projector: ProjectorCalibration | None = None, rig:
         for k in ("fx", "fy", "cx", "cy"):
             err = float(getattr(projector.projector, k) - getattr(true, k))
             bound = 1.96 * projector.projector_sigma[k]
-            out[f"projector {k}"] = {"error": err, "bound": bound, "unit": "px", "within": abs(err) <= bound}
+            out[f"projector {k}"] = _check(err, bound, "px", abs(err) / bound if bound > 0 else np.inf)
     if rig is not None and head is not None:
         true_head = HeadModel.from_dict(truth["head"])
         offset = np.asarray(truth["head_angle_offset_deg"])
@@ -270,21 +276,21 @@ def truth_check(truth: dict, projector: ProjectorCalibration | None = None, rig:
             assert pred_T is not None
             e_rot = rotation_vector(pred_T[:3, :3] @ true_T[:3, :3].T)
             e_pos = pred_T[:3, 3] - true_T[:3, 3]
-            out[f"head check {k + 1} orientation"] = {
-                "error": float(np.degrees(np.linalg.norm(e_rot))), "bound": p["rotation_95_deg"], "unit": "°",
-                "within": within_bound(e_rot, np.asarray(p["covariance_rotation"]))}
-            out[f"head check {k + 1} position"] = {
-                "error": float(1000 * np.linalg.norm(e_pos)), "bound": p["position_95_mm"], "unit": "mm",
-                "within": within_bound(e_pos, np.asarray(p["covariance_position"]))}
+            out[f"head check {k + 1} orientation"] = _check(
+                float(np.degrees(np.linalg.norm(e_rot))), p["rotation_95_deg"], "°",
+                share_of_bound(e_rot, np.asarray(p["covariance_rotation"])))
+            out[f"head check {k + 1} position"] = _check(
+                float(1000 * np.linalg.norm(e_pos)), p["position_95_mm"], "mm",
+                share_of_bound(e_pos, np.asarray(p["covariance_position"])))
     if mount is not None:
         T_true = np.asarray(truth["T_robot_from_camera_left"])
         e_rot, e_pos = mount_errors(mount.T_robot_from_camera_left, T_true)
         d_rot, d_pos = mount_errors(np.asarray(truth["T_robot_from_camera_left_design"]), T_true)
         bounds = mount.bounds_95()
-        out["mount rotation"] = {"error": float(np.degrees(np.linalg.norm(e_rot))), "bound": bounds["rotation_deg"],
-                                 "unit": "°", "within": within_bound(e_rot, mount.covariance[:3, :3]),
-                                 "design_error": float(np.degrees(np.linalg.norm(d_rot)))}
-        out["mount position"] = {"error": float(1000 * np.linalg.norm(e_pos)), "bound": bounds["position_mm"],
-                                 "unit": "mm", "within": within_bound(e_pos, mount.covariance[3:, 3:]),
-                                 "design_error": float(1000 * np.linalg.norm(d_pos))}
+        out["mount rotation"] = _check(float(np.degrees(np.linalg.norm(e_rot))), bounds["rotation_deg"], "°",
+                                       share_of_bound(e_rot, mount.covariance[:3, :3]),
+                                       design_error=float(np.degrees(np.linalg.norm(d_rot))))
+        out["mount position"] = _check(float(1000 * np.linalg.norm(e_pos)), bounds["position_mm"], "mm",
+                                       share_of_bound(e_pos, mount.covariance[3:, 3:]),
+                                       design_error=float(1000 * np.linalg.norm(d_pos)))
     return out

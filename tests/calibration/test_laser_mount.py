@@ -3,8 +3,16 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from calibration.laser_mount import BoardPlaneView, calibrate_mount, mount_errors, within_bound
+from calibration.laser_mount import (
+    CHI2_3_95,
+    BoardPlaneView,
+    calibrate_mount,
+    mount_errors,
+    share_of_bound,
+    within_bound,
+)
 from geometry.poses import invert, look_at, make_pose, rotation_about
 
 LASER_HEIGHT_M = 0.2
@@ -50,3 +58,11 @@ def test_mount_within_its_bound_better_than_the_design_and_outliers_dropped() ->
     # weakly fixed).
     assert inside >= 17
     assert np.mean(rot_errors) < 0.6 * design_rot and np.mean(pos_errors) < 0.8 * design_pos
+
+
+def test_share_of_bound_is_one_on_the_95_percent_ellipsoid() -> None:
+    cov = np.diag([1.0, 4.0, 9.0])
+    on_surface = np.array([0.0, 2.0 * np.sqrt(CHI2_3_95), 0.0])  # 2 = σ along y
+    assert share_of_bound(on_surface, cov) == pytest.approx(1.0)
+    assert share_of_bound(0.5 * on_surface, cov) == pytest.approx(0.5)
+    assert within_bound(0.99 * on_surface, cov) and not within_bound(1.01 * on_surface, cov)
