@@ -17,7 +17,7 @@ by the design mount (within GATE_M of the predicted plane and within the printed
 fit (RESIDUAL_GATE_SIGMAS). Uncertainty: the unweighted least squares' sandwich (JᵀJ)⁻¹ (Σ_k J_kᵀ Σ_k J_k)
 (JᵀJ)⁻¹, where view k's residuals have covariance σ²·I (σ from the residuals: range noise) plus A_k Σ_k Aᵀ_k,
 the board pose's own covariance (from PnP's Jacobian and its corner residuals) carried to the residuals. The
-camera's intrinsics are taken as exact.
+fit takes the camera's intrinsics as exact (see camera_draws_covariance).
 
 The laser alone leaves the mount weakly fixed: its scan is one horizontal line, so the mount's pitch, roll,
 height and forward offset move every panel's line nearly alike (with 6-12 panels 1.35-1.75 m away: errors of
@@ -207,6 +207,25 @@ def calibrate_mount(views: list[BoardPlaneView], scans_robot: list[NDArray[np.fl
     A = np.linalg.pinv(information)
     T = make_pose(rotation_matrix(x[:3]) @ T0[:3, :3], T0[:3, 3] + x[3:6])
     return MountFit(T, A @ middle @ A, float(np.sqrt(var)), [len(p) for p in picked], sources)
+
+
+def camera_draws_covariance(views: list[BoardView], scans_robot: list[NDArray[np.float64]],
+                            T_robot_from_camera_left_design: NDArray[np.float64], fit: MountFit,
+                            cameras: list[Intrinsics]) -> NDArray[np.float64]:
+    """What the camera's own calibration error does to the mount: the fit repeated with each of `cameras` (draws
+    of camera_left from its calibration's covariance; the laser data the same), the sample covariance of where
+    the mount lands (ω, δt about fit), 6x6. The fit itself takes the intrinsics as exact: add this to it."""
+    shifts = []
+    for camera in cameras:
+        try:
+            again = calibrate_mount([board_plane_view(v, camera) for v in views], scans_robot,
+                                    T_robot_from_camera_left_design)
+        except InputError:
+            continue  # this draw lost a view the fit needs: the spread goes without it
+        shifts.append(np.concatenate(mount_errors(again.T_robot_from_camera_left, fit.T_robot_from_camera_left)))
+    if len(shifts) < 2:
+        return np.zeros((6, 6))
+    return np.cov(np.array(shifts), rowvar=False)
 
 
 def build_error(params: NDArray[np.float64], T_design: NDArray[np.float64]) -> NDArray[np.float64]:

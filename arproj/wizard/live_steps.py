@@ -29,6 +29,7 @@ from calibration.laser_mount import (
     board_plane_view,
     bounds_95,
     calibrate_mount,
+    camera_draws_covariance,
     design_covariance,
     mount_errors,
     share_of_bound,
@@ -137,14 +138,8 @@ def _projector_uncertainty(calib: ProjectorCalibration, rig: Rig, points: list[N
     """The projector's σ from the jackknife over head poses and from the stereo pair's covariance carried
     through triangulation (the fit's own covariance takes the triangulated points as exact and their errors
     as independent: it is far too small); the samples also carry both to the head."""
-    stereo = rig.quality.get("stereo", {})
-    draws = []
-    if "parameter_covariance" in stereo:
-        draws = sample_stereo(rig.intrinsics["camera_left"], rig.intrinsics["camera_right"],
-                              rig.pose("T_camera_right_from_camera_left"), stereo["parameter_covariance"],
-                              stereo.get("distortion_model", "k1k2p1p2k3"), np.random.default_rng(STEREO_DRAW_SEED),
-                              STEREO_DRAWS)
-    else:
+    draws = stereo_draws(rig)
+    if not draws:
         calib.warnings.append("the rig has no stereo covariance (calibrated before it was kept): the projector's "
                               "and the head's bounds leave the stereo pair's uncertainty out")
     samples = projector_samples(points, pixels, size, camera_pixels,
@@ -152,6 +147,18 @@ def _projector_uncertainty(calib: ProjectorCalibration, rig: Rig, points: list[N
     cov = samples.covariance(lambda p, poses: np.array([p.fx, p.fy, p.cx, p.cy]))
     calib.projector_sigma = {k: float(np.sqrt(cov[i, i])) for i, k in enumerate(("fx", "fy", "cx", "cy"))}
     return samples
+
+
+def stereo_draws(rig: Rig) -> list[tuple[Intrinsics, Intrinsics, NDArray[np.float64]]]:
+    """STEREO_DRAWS draws of the stereo pair (left, right, T_right_from_left) from its calibration's covariance;
+    none when the rig has no covariance."""
+    stereo = rig.quality.get("stereo", {})
+    if "parameter_covariance" not in stereo:
+        return []
+    return sample_stereo(rig.intrinsics["camera_left"], rig.intrinsics["camera_right"],
+                         rig.pose("T_camera_right_from_camera_left"), stereo["parameter_covariance"],
+                         stereo.get("distortion_model", "k1k2p1p2k3"), np.random.default_rng(STEREO_DRAW_SEED),
+                         STEREO_DRAWS)
 
 
 def step_projector_board(station: LiveStation, board: Board, n_poses: int, camera: Intrinsics | None,
@@ -211,7 +218,7 @@ def step_mount(station: LiveStation, rig: Rig, out: Path, board: Board, n_poses:
                T_robot_from_camera_left_design: NDArray[np.float64]) -> tuple[dict, MountFit]:
     """The board at the top of a tall panel on the floor across the laser's plane, n poses → the mount."""
     camera = rig.intrinsics["camera_left"]
-    views, scans, missed = [], [], []
+    views, board_views, scans, missed = [], [], [], []
     for k in range(n_poses):
         station.before_change()
         station.mover.place("mount", f"mount pose {k + 1}/{n_poses}: stand the panel with the board on the floor "
@@ -223,8 +230,12 @@ def step_mount(station: LiveStation, rig: Rig, out: Path, board: Board, n_poses:
             missed.append(k)
             continue
         views.append(board_plane_view(view, camera))
+        board_views.append(view)
         scans.append(scan)
     fit = calibrate_mount(views, scans, T_robot_from_camera_left_design)
+    draws = stereo_draws(rig)  # the camera's calibration error moves every board plane alike: carried too
+    fit.covariance = fit.covariance + camera_draws_covariance(board_views, scans, T_robot_from_camera_left_design,
+                                                              fit, [left for left, _, _ in draws])
     bounds = fit.bounds_95()
     design = {k: round(v, 4) for k, v in bounds_95(design_covariance(T_robot_from_camera_left_design)).items()}
     adopted = all(bounds[k] <= design[k] for k in bounds)  # the fit starts from the design: only if it gained
