@@ -42,6 +42,7 @@ from calibration.projector import (
     calibrate_projector_with_board,
     decode_gray_code,
     gray_code_patterns,
+    on_wall_plane,
     projector_samples,
     projector_size_warning,
     stereo_correspondences,
@@ -107,7 +108,7 @@ def step_projector_stereo(station: LiveStation, rig: Rig, out: Path, angles: lis
         X = triangulate(left, right, T_rl, cl, cr)
         wall = wall_inliers(X)  # what stands in the beam before the wall is no wall point
         off_wall.append(int(np.count_nonzero(~wall)))
-        points.append(X[wall])
+        points.append(on_wall_plane(left, right, T_rl, cl[wall], cr[wall]))
         pixels.append(px[wall])
         camera_pixels.append((cl[wall], cr[wall]))
         used.append(a)
