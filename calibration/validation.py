@@ -149,11 +149,13 @@ def measure_grid(grid: ProjectedGrid, left_image: NDArray, right_image: NDArray,
 
 def snap_points_to_plane(X: NDArray[np.float64], left: Intrinsics, right: Intrinsics,
                          T_right_from_left: NDArray[np.float64], left_px: NDArray[np.float64],
-                         right_px: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+                         right_px: NDArray[np.float64], max_rms_m: float = PLANE_SNAP_MAX_M
+                         ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Triangulated points (n, 3) moved onto their best plane along both camera rays (see measure_grid).
 
     Returns (points, keep): points off the plane by more than PLANE_OUTLIER_M (a misidentified corner) are
-    marked to drop. A surface that is not flat keeps its triangulated points.
+    marked to drop. A surface that is not flat (its points off the plane by more than max_rms_m, RMS) keeps its
+    triangulated points.
     """
     keep = np.ones(len(X), bool)
     for _ in range(3):
@@ -164,7 +166,7 @@ def snap_points_to_plane(X: NDArray[np.float64], left: Intrinsics, right: Intrin
         if np.array_equal(new_keep, keep) or new_keep.sum() < 12:
             break
         keep = new_keep
-    if np.sqrt(np.mean(off[keep] ** 2)) > PLANE_SNAP_MAX_M:
+    if np.sqrt(np.mean(off[keep] ** 2)) > max_rms_m:
         return X, np.ones(len(X), bool)  # not a flat surface: keep the triangulated points
     on_left = cast_onto_plane(left, np.eye(4), left_px, point, normal)
     on_right = cast_onto_plane(right, invert(T_right_from_left), right_px, point, normal)

@@ -68,13 +68,19 @@ DISPLAY_LATENCY_S = 0.05  # a beamer shows a frame a little after it was sent
 STREAM_SNDBUF_BYTES = 16384  # small: a stalled reader finds at most about one frame queued
 JPEG_QUALITY = 95
 HEAD_SYNC_S = 0.01  # how often the worker follows the head simulator's physical angles
-MOUNT_ERROR_DEG = 0.5  # the stereo pair as mounted is off its drawing by this (σ per axis) ...
-MOUNT_ERROR_M = 0.005  # ... and this: what the mount calibration has to find
+# The stereo pair as mounted is off its drawing by this (σ per axis, in the robot frame) and this: what the mount
+# calibration has to find; the build tolerance it assumes (calibration.laser_mount.DESIGN_SIGMA_*) is the same.
+MOUNT_ERROR_DEG = 0.5
+MOUNT_ERROR_M = 0.005
 SMALL = {"cameras": {"width": 640, "height": 400}, "projector": {"width": 320, "height": 200}}
 BOARD = DEFAULT_BOARD  # the printed board the site's person holds (the one the wizard asks for)
 PANEL_HEIGHT_M = 1.5  # the mount plan's panel: the board printed at the top of a tall panel on the floor
 MAX_FRAME_BYTES = 64 * 1024 * 1024
 STEREO_PLAN_POSES = 48
+# The mount plan's panel poses (pose k: distance k mod 3, lean (k div 3) mod 3, yaw k mod 5, each jittered).
+MOUNT_PLAN_DISTANCES_M = (1.35, 1.55, 1.75)
+MOUNT_PLAN_LEANS_DEG = (0.0, 12.0, 24.0)
+MOUNT_PLAN_YAWS_DEG = (-25.0, 0.0, 25.0, 12.0, -12.0)
 
 
 @dataclass
@@ -317,10 +323,10 @@ def _place_board(site: Any, plan: str, k: int, jitter: NDArray[np.float64],
     # back and turned, so that the cameras see the board and the laser's plane cuts the panel lower down.
     panel = np.full((round(PANEL_HEIGHT_M / sq * pps), texture.shape[1]), 255, np.uint8)
     panel[:texture.shape[0]] = texture
-    distances, leans, yaws = (1.35, 1.55, 1.75), (0.0, 12.0, 24.0), (-25.0, 0.0, 25.0, 12.0, -12.0)
-    x0 = distances[k % 3] + 0.05 * jitter[0]
-    lean = np.radians(leans[(k // 3) % 3] + 2 * jitter[1])
-    yaw = np.radians(yaws[k % 5] + 3 * jitter[2])
+    distances, leans, yaws = MOUNT_PLAN_DISTANCES_M, MOUNT_PLAN_LEANS_DEG, MOUNT_PLAN_YAWS_DEG
+    x0 = distances[k % len(distances)] + 0.05 * jitter[0]
+    lean = np.radians(leans[(k // len(distances)) % len(leans)] + 2 * jitter[1])
+    yaw = np.radians(yaws[k % len(yaws)] + 3 * jitter[2])
     forward = np.array([np.cos(yaw), np.sin(yaw), 0.0])
     right = np.array([np.sin(yaw), -np.cos(yaw), 0.0])  # the viewer's right
     up = np.cos(lean) * np.array([0.0, 0.0, 1.0]) + np.sin(lean) * forward

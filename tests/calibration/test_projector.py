@@ -201,3 +201,27 @@ def test_pose_jackknife_agrees_with_the_fit_covariance_when_errors_are_independe
         assert np.all(jackknife > formal / 3) and np.all(jackknife < 3 * formal), (jackknife, formal)
         err = np.array([fit.projector.fx - PROJECTOR.fx, fit.projector.cy - PROJECTOR.cy])
         assert np.all(np.abs(err) <= 1.96 * np.sqrt(np.diag(cov)))
+
+
+def test_wall_points_on_their_plane_lose_the_stereo_depth_noise() -> None:
+    # The stereo pair's pixels of wall points 2 m away with 0.3 px noise: triangulated, they scatter ~1 cm in
+    # depth (taken as exact by the inverse-camera fit, that pulled the live calibration's projector focal length
+    # 0.9 % short, cy 1 px off); moved onto their fitted plane along the rays, a few tenths of a millimetre.
+    from calibration.projector import on_wall_plane
+    from geometry.poses import make_pose
+    from geometry.triangulation import triangulate
+
+    left = Intrinsics(700.0, 700.0, 319.5, 199.5, 640, 400)
+    right = Intrinsics(702.0, 702.0, 321.0, 198.0, 640, 400)
+    T_right_from_left = make_pose(None, [-0.15, 0.0, 0.0])
+    T_left_from_wall = plane_facing(2.0, 12.0, -5.0)
+    rng = np.random.default_rng(7)
+    X = transform_points(T_left_from_wall, np.column_stack([rng.uniform(-0.8, 0.8, (300, 2)), np.zeros(300)]))
+    cl = left.project(X) + rng.normal(0, 0.3, (len(X), 2))
+    cr = right.project(transform_points(T_right_from_left, X)) + rng.normal(0, 0.3, (len(X), 2))
+    normal = T_left_from_wall[:3, 2]
+    triangulated = (triangulate(left, right, T_right_from_left, cl, cr) - X) @ normal
+    on_plane = on_wall_plane(left, right, T_right_from_left, cl, cr) - X
+    assert np.std(triangulated) > 0.006
+    assert np.sqrt(np.mean((on_plane @ normal) ** 2)) < 0.001  # off the true wall
+    assert np.sqrt(np.mean(np.sum(on_plane ** 2, axis=1))) < 0.002  # and laterally: a ray's precision

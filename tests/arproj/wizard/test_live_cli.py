@@ -46,8 +46,12 @@ def test_live_calibration_through_the_cli(tmp_path: Path) -> None:
     assert abs(truth["projector fx"]["error"]) < 0.02 * p["projector"]["fx"]
     assert len(summary["head"]["check_angles"]) == 3
     assert all(truth[f"head check {k} position"]["error"] < 40.0 for k in (1, 2, 3))  # mm, at 2 m
-    m = summary["mount"]
-    assert m["adopted"] == (m["mount_95"]["rotation_deg"] <= 1.0 and m["mount_95"]["position_mm"] <= 10.0)
+    m, tolerance = summary["mount"], summary["mount"]["design_tolerance_95"]
+    assert m["adopted"] == all(m["mount_95"][k] <= tolerance[k] for k in ("rotation_deg", "position_mm"))
+    # The mount (the design value as prior, the laser's panels): adopted, within its bound, nearer the truth than
+    # the design value (the laser alone was 1.0° / 8 mm off here against the design's 0.96° / 13 mm)
+    assert m["adopted"] and truth["mount rotation"]["within"] and truth["mount position"]["within"]
+    assert all(truth[k]["error"] < truth[k]["design_error"] for k in ("mount rotation", "mount position")), truth
     rig = Rig.load(rig_dir)
     assert {"camera_left", "camera_right", "projector"} <= set(rig.intrinsics) and rig.head is not None
     assert "projector_95" in rig.quality["projector"] and "check_angles_95" in rig.quality["head"]
