@@ -359,17 +359,20 @@ class ProjectionSession:
                     & (uv[:, 0] <= cam.width - 1 - 2 * r_px) & (uv[:, 1] <= cam.height - 1 - 2 * r_px)
             return points[keep]
 
-        marks = seen_by_both(registration.choose_marks(T_wall_uncorrected, self.projector_intr,
-                                                       self.wall_map.extent))
+        candidates = registration.choose_marks(T_wall_uncorrected, self.projector_intr, self.wall_map.extent)
         checked = None if reg.trusted is None else reg.trusted.checked_polygon
         if checked is not None:  # verify what may be shown, not the rest
             dense = registration.choose_marks(T_wall_uncorrected, self.projector_intr, self.wall_map.extent,
                                               grid=(16, 10))
-            dense = seen_by_both(dense[registration.inside_polygon(dense, checked)])
-            step = max(1, int(np.ceil(len(dense) / CLOSED_LOOP_MARKS)))
-            marks = dense[::step]  # as many marks as usual, spread over the trusted part the cameras see
+            candidates = dense[registration.inside_polygon(dense, checked)]
+        marks = seen_by_both(candidates)
+        if checked is not None:
+            step = max(1, int(np.ceil(len(marks) / CLOSED_LOOP_MARKS)))
+            marks = marks[::step]  # as many marks as usual, spread over the trusted part the cameras see
         if len(marks) < tol.CLOSED_LOOP_MIN_FEATURES:
-            reg.loop = registration.ClosedLoopResult(marks, np.zeros((0, 2)), np.zeros(len(marks), bool),
+            # too few marks the cameras can photograph: the map drawn there cannot be checked, so every mark it
+            # would have had counts as unseen (the gate then refuses, "pattern lost"), never as none expected
+            reg.loop = registration.ClosedLoopResult(candidates, np.zeros((0, 2)), np.zeros(len(candidates), bool),
                                                      float("nan"), float("nan"))
             return reg.loop
         self.map_projector.set_check_marks(marks, radius_m)

@@ -136,3 +136,18 @@ def test_dead_head_shows_the_warning_and_the_session_stays_up(running):
     finally:
         head_sim.faults.dead = False
         session.robot.head.timeout_s = 0.1
+
+
+def test_marks_no_camera_can_photograph_leave_the_map_unchecked_and_refused(running, monkeypatch):
+    # marks outside both cameras' frames are not projected; when that leaves too few, the map they would have
+    # checked counts as unseen (pattern lost), never as a map with nothing to check
+    from arproj.session import gate, registration
+    from arproj.session import tolerances as tol
+
+    _, _, session, _, decision = running
+    assert decision.show_map, decision.reasons
+    monkeypatch.setattr(registration, "predict_camera_pixels", lambda marks, *_: np.full((len(marks), 2), np.nan))
+    loop = session.verify()
+    assert loop is not None and len(loop.marks_xy) >= tol.CLOSED_LOOP_MIN_FEATURES and not loop.seen.any()
+    refused = gate.decide(session.evidence(), tol.REGISTRATION_TOLERANCE_M)
+    assert not refused.show_map and any(r.startswith("pattern lost: 0 of") for r in refused.reasons)
