@@ -353,10 +353,10 @@ class ProjectionSession:
         def seen_by_both(points: NDArray[np.float64]) -> NDArray[np.float64]:
             # a mark neither camera can photograph cannot be checked: it is not projected nor counted as lost
             keep = np.ones(len(points), bool)
+            on_wall = np.column_stack([points, np.zeros(len(points))])
             for T_robot_from_cam, cam in ((T_robot_from_left, cam_l), (T_robot_from_right, cam_r)):
-                uv = registration.predict_camera_pixels(points, reg.T_wall_from_robot, T_robot_from_cam, cam)
-                keep &= np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= 2 * r_px) & (uv[:, 1] >= 2 * r_px) \
-                    & (uv[:, 0] <= cam.width - 1 - 2 * r_px) & (uv[:, 1] <= cam.height - 1 - 2 * r_px)
+                p_cam = transform_points(invert(reg.T_wall_from_robot @ T_robot_from_cam), on_wall)
+                keep &= registration.project_in_view(cam, p_cam, 2 * r_px / min(cam.width, cam.height))[1]
             return points[keep]
 
         candidates = registration.choose_marks(T_wall_uncorrected, self.projector_intr, self.wall_map.extent)

@@ -146,7 +146,8 @@ def test_marks_no_camera_can_photograph_leave_the_map_unchecked_and_refused(runn
 
     _, _, session, _, decision = running
     assert decision.show_map, decision.reasons
-    monkeypatch.setattr(registration, "predict_camera_pixels", lambda marks, *_: np.full((len(marks), 2), np.nan))
+    monkeypatch.setattr(registration, "project_in_view",
+                        lambda intr, p, margin=0.0: (np.full((len(p), 2), np.nan), np.zeros(len(p), bool)))
     loop = session.verify()
     assert loop is not None and len(loop.marks_xy) >= tol.CLOSED_LOOP_MIN_FEATURES and not loop.seen.any()
     refused = gate.decide(session.evidence(), tol.REGISTRATION_TOLERANCE_M)
