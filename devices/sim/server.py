@@ -24,6 +24,9 @@ from typing import Any
 from devices.link import BUSY_PREFIX, Framer
 from devices.sim.faults import FaultConfig, FaultInjector
 
+REFUSE_WAIT_S = 0.5  # the longest a refused host's open() may take before it asks something
+REFUSE_LINGER_S = 5.0  # the longest a refused host may take to read the BUSY line and hang up
+
 
 class SimDevice(ABC):
     """What a DeviceServer serves. Subclasses set `name` and `framer` and implement handle()."""
@@ -135,12 +138,26 @@ class DeviceServer(threading.Thread):
             except OSError:
                 return True  # the one who knocked is gone already
             self.refused += 1
-            with other, contextlib.suppress(OSError):
-                other.sendall(BUSY_PREFIX + f"simulated {self.device.name} on port {self.port} already has a "
-                              f"controlling host; one program drives it at a time (refused {address[0]}:"
-                              f"{address[1]})\n".encode())
-                other.shutdown(socket.SHUT_RDWR)
+            threading.Thread(target=self._turn_away, args=(other, address), daemon=True,
+                             name=f"sim-{self.device.name}-refusal").start()
         return True
+
+    def _turn_away(self, other: socket.socket, address: tuple[str, int]) -> None:
+        """Say BUSY to a host that connected while another drives the device, then hang up, so that the line
+        reaches it. pyserial's socket:// open() discards whatever arrives before it returns, so the line waits
+        for the host's first request (or REFUSE_WAIT_S); and the hang-up waits for the host to read the line
+        and close (or REFUSE_LINGER_S), since closing with its request unread sends a reset, which can discard
+        the line before the host reads it. A thread of its own: the controlling host is never kept waiting."""
+        line = (BUSY_PREFIX + f"simulated {self.device.name} on port {self.port} already has a controlling host; "
+                f"one program drives it at a time (refused {address[0]}:{address[1]})\n".encode())
+        with other, contextlib.suppress(OSError):
+            select.select([other], [], [], REFUSE_WAIT_S)
+            other.sendall(line)
+            other.shutdown(socket.SHUT_WR)
+            end = time.monotonic() + REFUSE_LINGER_S
+            while not self.stopping.is_set() and time.monotonic() < end:
+                if select.select([other], [], [], 0.05)[0] and not other.recv(65536):
+                    return  # the host read the line and hung up
 
     def _keep_talking(self, conn: socket.socket, framer: Framer[Any, Any], answer: Any, kind: str) -> bool:
         """Send chatter frames (stream) or bytes that never end a frame (flood) instead of `answer` until the
