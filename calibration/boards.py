@@ -33,6 +33,7 @@ SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_MAX_ITER | cv2.TERM_CRITERIA_EPS, 100, 1e-4
 # whichever is larger) is refined again from the prediction (see grid_predictions for how near good ones are).
 SUBPIX_RETRY_MIN_PX = 1.0
 SUBPIX_RETRY_FRACTION = 0.05
+SB_RNG_SEED = 0x5B  # findChessboardCornersSB's random sampling, fixed (see detect)
 
 # Squares above this are implausible for a printed board: the size was most likely typed in mm or cm.
 MAX_SQUARE_M = 0.3
@@ -267,7 +268,10 @@ def detect(board: Board, image: NDArray, source: str = "") -> BoardView | None:
         flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
         found, corners = cv2.findChessboardCorners(gray, board.pattern_size, flags=flags)
         if not found:
-            # The sector-based detector copes with blur and uneven light where the classic one gives up.
+            # The sector-based detector copes with blur and uneven light where the classic one gives up. It
+            # samples with OpenCV's global RNG: seeded here, a detection depends on the image alone (unseeded, the
+            # same image gave a board in one call and none in the next).
+            cv2.setRNGSeed(SB_RNG_SEED)
             found, corners = cv2.findChessboardCornersSB(gray, board.pattern_size, flags=cv2.CALIB_CB_EXHAUSTIVE)
             if not found:
                 return None

@@ -103,3 +103,25 @@ def test_charuco_detection_finds_known_corners() -> None:
     expected = np.column_stack([60 + 60 * (1 + view.ids % cols), 60 + 60 * (1 + view.ids // cols)]) - 0.5
     # Noise-free print, corners on pixel centres: exact up to float32 (~1e-5 px); a half-pixel slip would fail.
     assert np.max(np.abs(view.image_points - expected)) < CORNER_TOLERANCE_PX
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("name", ["left01", "left13"])
+def test_a_detection_depends_on_the_image_alone_not_on_opencvs_random_state(shared_data, name: str) -> None:
+    """findChessboardCornersSB samples with OpenCV's global RNG: on OpenCV's sample images with the wrong 7x5
+    board it found a board after one RNG state and none after another (left01: none after state 0, left13: none
+    after state 6), so a calibration used different pairs and gave different baselines from run to run. Whatever
+    the RNG's state before, the same image gives the same view."""
+    path = shared_data / "opencv-stereo-chessboard" / f"{name}.jpg"
+    if not path.is_file():
+        pytest.skip(f"{path} is absent")
+    board = parse_board("chessboard:7x5:0.025")
+    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    views = []
+    for state in (0, 1, 6, 7):
+        cv2.setRNGSeed(state)  # as other code would leave it
+        views.append(detect(board, image))
+    found = [v is not None for v in views]
+    assert len(set(found)) == 1
+    if found[0]:
+        assert all(np.array_equal(v.image_points, views[0].image_points) for v in views)  # type: ignore[union-attr]

@@ -171,11 +171,7 @@ def test_a_wrong_board_is_refused_and_the_earlier_rig_kept(arproj: Callable[...,
     assert {p.name: p.read_bytes() for p in out.iterdir()} == good
     done = arproj(*args, "--board", "chessboard:7x5:0.025", "--accept-poor")
     assert "Traceback" not in done.stderr
-    if done.returncode == 2:
-        # the wrong board's fit is degenerate: once in a fresh-clone CI run its outlier rejection left too few
-        # views to calibrate at all (cause not found; not reproduced in 8 runs here) — refused, the rig kept
-        assert "error" in done.stderr.lower() and {p.name: p.read_bytes() for p in out.iterdir()} == good
-        return
+    # once the sector detector's RNG was unseeded and the wrong board was found in fewer images: too few views
     assert done.returncode == 0 and "written although poor" in done.stderr
     assert Rig.load(out).quality["stereo"]["reprojection_rms_px"] > 5.0
 
