@@ -252,7 +252,8 @@ def _registrations(ctx: object, rigs: list[tuple[str, Any]], wall_map: Any, quic
         if reg is None or not decision.show_map:
             out.rows.append(RegistrationRow(**where, shown_pct=GATE_CLOSED))
             out.notes.append(f"{label} rig, {distance:.0f} m, {incidence:.0f}°: gate closed — "
-                             + "; ".join(decision.reasons)[:160])
+                             + "; ".join(decision.reasons)[:160] + (f"; map cut by {reg.cut_by}" if reg and reg.cut_by
+                                                                     else ""))
             if label == "calibrated":
                 out.all_calibrated_met = False
             session.close()
@@ -284,6 +285,9 @@ def _registrations(ctx: object, rigs: list[tuple[str, Any]], wall_map: Any, quic
             peer_p95_mm=round(1000 * np.percentile(peer, 95), 3),
             peer_ratio=round(peer.mean() / max(errors.mean(), 1e-9), 2), met="yes" if met else "NO",
             half_px="yes" if errors.mean() <= 0.5 * footprint else "NO"))
+        if shown < SHOWN_TARGET and reg.cut_by:
+            out.notes.append(f"{label} rig, {distance:.0f} m, {incidence:.0f}°: map cut to {100 * shown:.0f} % by "
+                             + reg.cut_by)
         if np.isnan(out.latency.median_ms):
             out.latency = _latency(session, quick)
         out.bases.append(scenarios.Station(site, session, robot, ctx))
