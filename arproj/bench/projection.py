@@ -354,7 +354,8 @@ def _corner(ctx: object, rigs: list[tuple[str, Any]], wall_map: Any, seed: int
             if v is None or not v.shown:
                 rows.append(RegistrationRow(**where, shown_pct=GATE_CLOSED))
                 notes.append(f"corner, {label} rig, {distance:.0f} m, wall {k}: gate closed — "
-                             + ("no registration" if v is None else "; ".join(v.decision.reasons)[:160]))
+                             + ("no registration" if v is None else "; ".join(v.decision.reasons)[:160])
+                             + (f"; map cut by {v.cut_by}" if v is not None and v.cut_by else ""))
                 continue
             T_room_from_projector, reg = rs.T_room_from_projector, rs.session.registration
             assert T_room_from_projector is not None and reg is not None  # a wall was judged: registered

@@ -105,9 +105,12 @@ def pixel_footprint_m(T_wall_from_projector: NDArray[np.float64], projector: Int
 
 
 # Wall-frame degrees of freedom of the robot's pose, as pose_sigma_on_wall_m's `known` names them: rotations
-# about the wall's x (along, a pitch when facing), y (up, the heading) and z (the normal: the robot's roll when
-# facing it), and positions along, up and off the wall.
-POSE_DOFS = ("rotation about x", "rotation about y", "rotation about the normal", "along", "height", "distance")
+# about the wall's x (horizontal along it: the robot's pitch when facing it), y (the vertical: its heading) and z
+# (the normal: its roll when facing it), and its position along, up and off the wall.
+POSE_DOFS = ("tilt about the wall's horizontal", "turn about the vertical", "rotation about the wall's normal",
+             "position along the wall", "height", "distance")
+# What an inclinometer on the robot measures (the wall being vertical): both tilts against gravity
+TILT_DOFS = (POSE_DOFS[0], POSE_DOFS[2])
 
 
 def pose_sigma_on_wall_m(points_xy: NDArray[np.float64], T_wall_from_robot: NDArray[np.float64],
@@ -218,13 +221,14 @@ def why_cut(terms: SigmaTerms, points_xy: NDArray[np.float64], cut: NDArray[np.b
     pts = np.asarray(points_xy, dtype=np.float64)[cut]
     others = np.sqrt(np.maximum(terms.total[cut] ** 2 - terms.pose[cut] ** 2, 0.0))
 
-    def bound_if_known(dof: str) -> float:
-        pose = pose_sigma_on_wall_m(pts, T_wall_from_robot, covariance, known=(dof,))
+    def bound_if_known(dofs: tuple[str, ...]) -> float:
+        pose = pose_sigma_on_wall_m(pts, T_wall_from_robot, covariance, known=dofs)
         return float(np.mean(tol.Z95 * np.sqrt(others ** 2 + pose ** 2)))
 
-    after = {dof: bound_if_known(dof) for dof in POSE_DOFS}
+    after = {dof: bound_if_known((dof,)) for dof in POSE_DOFS}
     best = min(after, key=lambda k: after[k])
-    return f"{say}: the pose's {best} known would leave {1000 * after[best]:.1f} mm"
+    return (f"{say}: the pose's {best} known would leave {1000 * after[best]:.1f} mm, both tilts known (an "
+            f"inclinometer) {1000 * bound_if_known(TILT_DOFS):.1f} mm")
 
 
 def local_registration_sigma_m(centre_distance_95_m: float, normal_95_deg: float,

@@ -158,7 +158,7 @@ def test_pose_sigma_with_a_dof_known_is_the_conditional_spread_and_the_terms_nam
     rng = np.random.default_rng(5)
     A = rng.normal(size=(6, 6)) * np.array([1e-3, 1e-3, 2e-3, 2e-3, 2e-3, 2e-3])
     cov = A @ A.T
-    known = registration.pose_sigma_on_wall_m(points, T, cov, known=("rotation about the normal",))
+    known = registration.pose_sigma_on_wall_m(points, T, cov, known=("rotation about the wall's normal",))
     # the spread of the draws whose rotation about the wall's normal is (nearly) nil: the conditional spread
     draws = rng.multivariate_normal(np.zeros(6), cov, 200_000)
     roll = (T[:3, :3] @ draws[:, :3].T)[2]
@@ -169,7 +169,7 @@ def test_pose_sigma_with_a_dof_known_is_the_conditional_spread_and_the_terms_nam
     # a pose whose only uncertainty is the roll about the normal: nothing left once the roll is known
     only_roll = np.zeros((6, 6))
     only_roll[:3, :3] = T[:3, :3].T @ np.diag([0.0, 0.0, np.radians(0.1) ** 2]) @ T[:3, :3]
-    assert registration.pose_sigma_on_wall_m(points, T, only_roll, known=("rotation about the normal",)) \
+    assert registration.pose_sigma_on_wall_m(points, T, only_roll, known=("rotation about the wall's normal",)) \
         == pytest.approx(0.0, abs=1e-9)  # nanometres: the round-off of subtracting the roll's share
     pose = registration.pose_sigma_on_wall_m(points, T, only_roll)
     terms = registration.registration_sigma_terms(0.001, 0.05, T, points, points[0], 0.0, 0.001, 0.1,
