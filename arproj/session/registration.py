@@ -294,6 +294,12 @@ def checked_region(region: TrustedRegion, measured_m: float, tolerance_m: float)
     return checked, checked.sigma_m if checked.usable else float(region.point_sigma_m.max())
 
 
+def within_tolerance(sigma_m: NDArray[np.float64], tolerance_m: float,
+                     reserve_m: float = tol.CLOSED_LOOP_RESERVE_M) -> NDArray[np.bool_]:
+    """(n,) which points' 95 % error (of their 1σ sigma_m) plus reserve_m stays within the tolerance."""
+    return np.asarray(tol.Z95 * np.asarray(sigma_m, dtype=np.float64) + reserve_m <= tolerance_m, dtype=bool)
+
+
 def trusted_region(points_xy: NDArray[np.float64], sigma_m: NDArray[np.float64], tolerance_m: float,
                    reserve_m: float = tol.CLOSED_LOOP_RESERVE_M) -> TrustedRegion:
     """The part of the drawn area where the registration is within tolerance (95 %, with reserve_m left for
@@ -303,7 +309,7 @@ def trusted_region(points_xy: NDArray[np.float64], sigma_m: NDArray[np.float64],
     sigma_m = np.asarray(sigma_m, dtype=np.float64)
     if len(sigma_m) == 0:
         return TrustedRegion(None, float("inf"), 0.0)
-    ok = tol.Z95 * sigma_m + reserve_m <= tolerance_m
+    ok = within_tolerance(sigma_m, tolerance_m, reserve_m)
     share = float(ok.mean())
     if ok.all():
         return TrustedRegion(None, float(sigma_m.max()), 1.0, points_xy, sigma_m)

@@ -443,7 +443,7 @@ class RoomSession:
                 reg.calibration_px, reg.roll_sigma_rad, lever_m=lever, pose_sigma_m=pose_sigma)
             local = terms.total
             trusted = registration.trusted_region(drawn, local, self.tolerance_m)
-            cut_by = registration.why_cut(terms, drawn, tol.Z95 * local + tol.CLOSED_LOOP_RESERVE_M > self.tolerance_m,
+            cut_by = registration.why_cut(terms, drawn, ~registration.within_tolerance(local, self.tolerance_m),
                                           T_wall_from_robot, reg.pose_covariance)
             if len(ev.closed_loop_errors_m):
                 trusted, sigma = registration.checked_region(

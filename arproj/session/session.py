@@ -326,7 +326,7 @@ class ProjectionSession:
             pose_sigma_m=pose_sigma)
         local = terms.total
         trusted = registration.trusted_region(drawn, local, self.tolerance_m)
-        cut_by = registration.why_cut(terms, drawn, tol.Z95 * local + tol.CLOSED_LOOP_RESERVE_M > self.tolerance_m,
+        cut_by = registration.why_cut(terms, drawn, ~registration.within_tolerance(local, self.tolerance_m),
                                       T_wall_from_robot, fused.covariance)
         sigma = trusted.sigma_m if trusted.usable else (float(local.max()) if len(local) else float("inf"))
         laser_offset = None if scan is None else registration.laser_plane_offset_m(T_wall_from_robot, scan, aim[0])
