@@ -252,7 +252,8 @@ def _registrations(ctx: object, rigs: list[tuple[str, Any]], wall_map: Any, quic
         if reg is None or not decision.show_map:
             out.rows.append(RegistrationRow(**where, shown_pct=GATE_CLOSED))
             out.notes.append(f"{label} rig, {distance:.0f} m, {incidence:.0f}°: gate closed — "
-                             + "; ".join(decision.reasons)[:160])
+                             + "; ".join(decision.reasons)[:160] + (f"; map cut by {reg.cut_by}" if reg and reg.cut_by
+                                                                     else ""))
             if label == "calibrated":
                 out.all_calibrated_met = False
             session.close()
@@ -284,6 +285,9 @@ def _registrations(ctx: object, rigs: list[tuple[str, Any]], wall_map: Any, quic
             peer_p95_mm=round(1000 * np.percentile(peer, 95), 3),
             peer_ratio=round(peer.mean() / max(errors.mean(), 1e-9), 2), met="yes" if met else "NO",
             half_px="yes" if errors.mean() <= 0.5 * footprint else "NO"))
+        if shown < SHOWN_TARGET and reg.cut_by:
+            out.notes.append(f"{label} rig, {distance:.0f} m, {incidence:.0f}°: map cut to {100 * shown:.0f} % by "
+                             + reg.cut_by)
         if np.isnan(out.latency.median_ms):
             out.latency = _latency(session, quick)
         out.bases.append(scenarios.Station(site, session, robot, ctx))
@@ -350,7 +354,8 @@ def _corner(ctx: object, rigs: list[tuple[str, Any]], wall_map: Any, seed: int
             if v is None or not v.shown:
                 rows.append(RegistrationRow(**where, shown_pct=GATE_CLOSED))
                 notes.append(f"corner, {label} rig, {distance:.0f} m, wall {k}: gate closed — "
-                             + ("no registration" if v is None else "; ".join(v.decision.reasons)[:160]))
+                             + ("no registration" if v is None else "; ".join(v.decision.reasons)[:160])
+                             + (f"; map cut by {v.cut_by}" if v is not None and v.cut_by else ""))
                 continue
             T_room_from_projector, reg = rs.T_room_from_projector, rs.session.registration
             assert T_room_from_projector is not None and reg is not None  # a wall was judged: registered

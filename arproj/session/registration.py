@@ -104,8 +104,17 @@ def pixel_footprint_m(T_wall_from_projector: NDArray[np.float64], projector: Int
     return float(max(np.linalg.norm(pts[1] - pts[0]), np.linalg.norm(pts[2] - pts[0])))
 
 
+# Wall-frame degrees of freedom of the robot's pose, as pose_sigma_on_wall_m's `known` names them: rotations
+# about the wall's x (horizontal along it: the robot's pitch when facing it), y (the vertical: its heading) and z
+# (the normal: its roll when facing it), and its position along, up and off the wall.
+POSE_DOFS = ("tilt about the wall's horizontal", "turn about the vertical", "rotation about the wall's normal",
+             "position along the wall", "height", "distance")
+# What an inclinometer on the robot measures (the wall being vertical): both tilts against gravity
+TILT_DOFS = (POSE_DOFS[0], POSE_DOFS[2])
+
+
 def pose_sigma_on_wall_m(points_xy: NDArray[np.float64], T_wall_from_robot: NDArray[np.float64],
-                         covariance: NDArray[np.float64]) -> NDArray[np.float64]:
+                         covariance: NDArray[np.float64], known: tuple[str, ...] = ()) -> NDArray[np.float64]:
     """1σ (n,) metres by which wall points (n, 2) fixed to the robot move in the wall's plane when the robot's
     pose is off by δ ~ N(0, covariance) (6, 6): δ = (rotation vector rad, translation m) in the robot frame,
     T_true = T_wall_from_robot · exp(δ) (wallpose.pose.WallPose.covariance).
@@ -114,9 +123,22 @@ def pose_sigma_on_wall_m(points_xy: NDArray[np.float64], T_wall_from_robot: NDAr
     normal times the distance from where the robot's position is pinned, and by a turn about an in-plane axis
     (pitch, heading) times the distance to the wall — all with their correlations. The length of the 2-D
     displacement (root of the 2x2 covariance's trace). Its out-of-plane part slides the landing along the ray:
-    that is the plane's share (local_registration_sigma_m's offset and tilt terms)."""
+    that is the plane's share (local_registration_sigma_m's offset and tilt terms).
+
+    known: wall-frame degrees of freedom (POSE_DOFS) taken as measured exactly — the covariance conditioned on
+    them (what another sensor, e.g. an inclinometer for the roll, would leave at best)."""
     pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
     R = np.asarray(T_wall_from_robot, dtype=np.float64)[:3, :3]
+    C = np.asarray(covariance, dtype=np.float64)
+    if known:
+        # δ in wall axes (rotation, translation) = blockdiag(R, R)·δ; condition there, then back
+        B = np.kron(np.eye(2), R)
+        W = B @ C @ B.T
+        for dof in known:
+            k = POSE_DOFS.index(dof)
+            if W[k, k] > 0:
+                W = W - np.outer(W[:, k], W[k, :]) / W[k, k]
+        C = B.T @ W @ B
     X = transform_points(invert(T_wall_from_robot), np.column_stack([pts, np.zeros(len(pts))]))
     # d(wall point)/dδ = R·[-[X]×, I] for a robot-frame point X; only the wall's x and y rows
     J = np.zeros((len(pts), 2, 6))
@@ -126,8 +148,87 @@ def pose_sigma_on_wall_m(points_xy: NDArray[np.float64], T_wall_from_robot: NDAr
     skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -X[:, 2], X[:, 1], -X[:, 0]
     skew -= np.transpose(skew, (0, 2, 1))
     J[:, :, :3] = -np.einsum("ij,njk->nik", Rxy, skew)
-    cov = np.einsum("nij,jk,nlk->nil", J, np.asarray(covariance, dtype=np.float64), J)
+    cov = np.einsum("nij,jk,nlk->nil", J, C, J)
     return np.asarray(np.sqrt(np.maximum(np.trace(cov, axis1=1, axis2=2), 0.0)), dtype=np.float64)
+
+
+@dataclass
+class SigmaTerms:
+    """The registration error's 1σ terms (n,) metres at each drawn point; the bound is their root sum of
+    squares (local_registration_sigma_m). offset / tilt: the plane's offset and tilt sliding the landing along
+    the projector's ray; in_plane: the map frame's (or, without a fused pose, the pose's) in-plane σ;
+    calibration: the projector calibration's residual on the wall; pose: the fused pose's own σ
+    (pose_sigma_on_wall_m), or the roll about the normal times the lever without one."""
+
+    offset: NDArray[np.float64]
+    tilt: NDArray[np.float64]
+    in_plane: NDArray[np.float64]
+    calibration: NDArray[np.float64]
+    pose: NDArray[np.float64]
+
+    NAMES = ("offset", "tilt", "in_plane", "calibration", "pose")
+
+    @property
+    def total(self) -> NDArray[np.float64]:
+        return np.asarray(np.sqrt(sum(getattr(self, name) ** 2 for name in self.NAMES)), dtype=np.float64)
+
+    def largest(self, where: NDArray[np.bool_] | None = None) -> tuple[str, float]:
+        """The term with the largest mean square over the points `where` (all: None) and its share of the
+        total variance there."""
+        mask = np.ones(len(self.total), bool) if where is None else np.asarray(where, dtype=bool)
+        if not mask.any():
+            return "none", 0.0
+        var = {name: float(np.mean(getattr(self, name)[mask] ** 2)) for name in self.NAMES}
+        name = max(var, key=lambda k: var[k])
+        return name, var[name] / max(sum(var.values()), 1e-300)
+
+
+def registration_sigma_terms(centre_distance_95_m: float, normal_95_deg: float,
+                             T_wall_from_projector: NDArray[np.float64], points_xy: NDArray[np.float64],
+                             centre_xy: NDArray[np.float64], in_plane_sigma_m: float, footprint_m: float,
+                             calibration_px: float, roll_sigma_rad: float = 0.0,
+                             lever_m: NDArray[np.float64] | None = None,
+                             pose_sigma_m: NDArray[np.float64] | None = None) -> SigmaTerms:
+    """The terms of local_registration_sigma_m (same arguments), each (n,)."""
+    pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    rays = np.column_stack([pts, np.zeros(len(pts))]) - T_wall_from_projector[:3, 3]
+    cos_i = np.abs(rays[:, 2]) / np.linalg.norm(rays, axis=1)
+    tan_i = np.tan(np.minimum(np.arccos(np.clip(cos_i, 0.0, 1.0)), np.radians(80.0)))
+    lever = np.linalg.norm(pts - np.asarray(centre_xy, dtype=np.float64)[:2], axis=1) if lever_m is None \
+        else np.asarray(lever_m, dtype=np.float64)
+    ones = np.ones(len(pts))
+    return SigmaTerms(
+        offset=centre_distance_95_m / tol.Z95 * tan_i,
+        tilt=lever * np.radians(normal_95_deg) / np.sqrt(5.991) * tan_i,
+        in_plane=in_plane_sigma_m * ones, calibration=calibration_px * footprint_m * ones,
+        pose=lever * roll_sigma_rad if pose_sigma_m is None else np.asarray(pose_sigma_m, dtype=np.float64) * ones)
+
+
+def why_cut(terms: SigmaTerms, points_xy: NDArray[np.float64], cut: NDArray[np.bool_],
+            T_wall_from_robot: NDArray[np.float64] | None = None,
+            covariance: NDArray[np.float64] | None = None) -> str:
+    """What cuts the map where the bound exceeds the tolerance (cut (n,)): the largest term there and, when it
+    is the fused pose's, the degree of freedom (POSE_DOFS) whose exact knowledge would shrink the bound there
+    most, with the mean 95 % bound before and after. Empty when nothing is cut."""
+    cut = np.asarray(cut, dtype=bool)
+    if not cut.any():
+        return ""
+    name, share = terms.largest(cut)
+    before = float(np.mean(tol.Z95 * terms.total[cut]))
+    say = f"the {name} term ({100 * share:.0f} % of the variance where cut; 95 % bound there {1000 * before:.1f} mm)"
+    if name != "pose" or covariance is None or T_wall_from_robot is None:
+        return say
+    pts = np.asarray(points_xy, dtype=np.float64)[cut]
+    others = np.sqrt(np.maximum(terms.total[cut] ** 2 - terms.pose[cut] ** 2, 0.0))
+
+    def bound_if_known(dofs: tuple[str, ...]) -> float:
+        pose = pose_sigma_on_wall_m(pts, T_wall_from_robot, covariance, known=dofs)
+        return float(np.mean(tol.Z95 * np.sqrt(others ** 2 + pose ** 2)))
+
+    after = {dof: bound_if_known((dof,)) for dof in POSE_DOFS}
+    best = min(after, key=lambda k: after[k])
+    return (f"{say}: the pose's {best} known would leave {1000 * after[best]:.1f} mm, both tilts known (an "
+            f"inclinometer) {1000 * bound_if_known(TILT_DOFS):.1f} mm")
 
 
 def local_registration_sigma_m(centre_distance_95_m: float, normal_95_deg: float,
@@ -146,18 +247,11 @@ def local_registration_sigma_m(centre_distance_95_m: float, normal_95_deg: float
     each point's distance from the pattern's centre when that lies off this wall (another wall of a corner).
     pose_sigma_m (n,): the wall pose's own 1σ at each point (pose_sigma_on_wall_m, from its full covariance);
     it takes the place of the roll term, in_plane_sigma_m is then what adds to it (the map frame's σ).
+    The terms one by one: registration_sigma_terms.
     """
-    pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
-    rays = np.column_stack([pts, np.zeros(len(pts))]) - T_wall_from_projector[:3, 3]
-    cos_i = np.abs(rays[:, 2]) / np.linalg.norm(rays, axis=1)
-    tan_i = np.tan(np.minimum(np.arccos(np.clip(cos_i, 0.0, 1.0)), np.radians(80.0)))
-    lever = np.linalg.norm(pts - np.asarray(centre_xy, dtype=np.float64)[:2], axis=1) if lever_m is None \
-        else np.asarray(lever_m, dtype=np.float64)
-    s_offset = centre_distance_95_m / tol.Z95 * tan_i
-    s_normal = lever * np.radians(normal_95_deg) / np.sqrt(5.991) * tan_i
-    s_calib = calibration_px * footprint_m
-    s_pose = lever * roll_sigma_rad if pose_sigma_m is None else np.asarray(pose_sigma_m, dtype=np.float64)
-    return np.sqrt(s_offset ** 2 + s_normal ** 2 + in_plane_sigma_m ** 2 + s_calib ** 2 + s_pose ** 2)
+    return registration_sigma_terms(centre_distance_95_m, normal_95_deg, T_wall_from_projector, points_xy,
+                                    centre_xy, in_plane_sigma_m, footprint_m, calibration_px, roll_sigma_rad,
+                                    lever_m, pose_sigma_m).total
 
 
 def inside_polygon(points_xy: NDArray[np.float64], polygon: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -200,6 +294,12 @@ def checked_region(region: TrustedRegion, measured_m: float, tolerance_m: float)
     return checked, checked.sigma_m if checked.usable else float(region.point_sigma_m.max())
 
 
+def within_tolerance(sigma_m: NDArray[np.float64], tolerance_m: float,
+                     reserve_m: float = tol.CLOSED_LOOP_RESERVE_M) -> NDArray[np.bool_]:
+    """(n,) which points' 95 % error (of their 1σ sigma_m) plus reserve_m stays within the tolerance."""
+    return np.asarray(tol.Z95 * np.asarray(sigma_m, dtype=np.float64) + reserve_m <= tolerance_m, dtype=bool)
+
+
 def trusted_region(points_xy: NDArray[np.float64], sigma_m: NDArray[np.float64], tolerance_m: float,
                    reserve_m: float = tol.CLOSED_LOOP_RESERVE_M) -> TrustedRegion:
     """The part of the drawn area where the registration is within tolerance (95 %, with reserve_m left for
@@ -209,7 +309,7 @@ def trusted_region(points_xy: NDArray[np.float64], sigma_m: NDArray[np.float64],
     sigma_m = np.asarray(sigma_m, dtype=np.float64)
     if len(sigma_m) == 0:
         return TrustedRegion(None, float("inf"), 0.0)
-    ok = tol.Z95 * sigma_m + reserve_m <= tolerance_m
+    ok = within_tolerance(sigma_m, tolerance_m, reserve_m)
     share = float(ok.mean())
     if ok.all():
         return TrustedRegion(None, float(sigma_m.max()), 1.0, points_xy, sigma_m)

@@ -238,6 +238,7 @@ class WallVerdict:
     loop: registration.ClosedLoopResult | None = None
     correction_xy: NDArray[np.float64] = field(default_factory=lambda: np.zeros(2))
     trusted: registration.TrustedRegion | None = None
+    cut_by: str = ""  # what cuts the map on this wall (registration.why_cut)
 
     @property
     def shown(self) -> bool:
@@ -388,7 +389,7 @@ class RoomSession:
         if reg is not None and T_room_from_projector is not None:
             self._T_room_from_robot_known = self.T_room_from_robot
             verdicts[anchor] = WallVerdict(self.walls[anchor].index, first, reg.T_wall_from_projector.copy(),
-                                           reg.loop, reg.correction_xy.copy(), reg.trusted)
+                                           reg.loop, reg.correction_xy.copy(), reg.trusted, reg.cut_by)
             share = beam_share(self.walls, T_room_from_projector, self.projector_intr)
             for k in range(len(self.walls)):
                 if k != anchor and share[k] > 0:
@@ -414,7 +415,7 @@ class RoomSession:
         if loop.seen.sum() >= tol.CLOSED_LOOP_MIN_FEATURES and \
                 np.linalg.norm(loop.offset_xy) <= tol.CLOSED_LOOP_MAX_CORRECTION_M:
             correction = loop.offset_xy
-        trusted = None
+        trusted, cut_by = None, ""
         ev = gate.RegistrationEvidence(pose_failure=None, head_command_error_deg=s.last_evidence.head_command_error_deg,
                                        robot_motion_m=s.last_evidence.robot_motion_m,
                                        laser_plane_offset_m=s.last_evidence.laser_plane_offset_m,
@@ -436,11 +437,14 @@ class RoomSession:
             # the fused pose's own error at this wall's points, from its full covariance (as on the first wall)
             pose_sigma = None if reg.pose_covariance is None else \
                 registration.pose_sigma_on_wall_m(drawn, T_wall_from_robot, reg.pose_covariance)
-            local = registration.local_registration_sigma_m(
+            terms = registration.registration_sigma_terms(
                 reg.plane.centre_distance_95_m, reg.plane.normal_95_deg, T_wall_from_projector, drawn,
                 drawn[0], reg.in_plane_sigma_m if pose_sigma is None else reg.frame_sigma_m, footprint,
                 reg.calibration_px, reg.roll_sigma_rad, lever_m=lever, pose_sigma_m=pose_sigma)
+            local = terms.total
             trusted = registration.trusted_region(drawn, local, self.tolerance_m)
+            cut_by = registration.why_cut(terms, drawn, ~registration.within_tolerance(local, self.tolerance_m),
+                                          T_wall_from_robot, reg.pose_covariance)
             if len(ev.closed_loop_errors_m):
                 trusted, sigma = registration.checked_region(
                     trusted, float(np.max(ev.closed_loop_errors_m)) + ev.robot_motion_m, self.tolerance_m)
@@ -450,7 +454,8 @@ class RoomSession:
         else:
             ev.pose_failure = f"wall {w.index}: none of its map is in the beam"
         decision = gate.decide(ev, self.tolerance_m)
-        return WallVerdict(w.index, decision, _shift(correction) @ T_wall_from_projector, loop, correction, trusted)
+        return WallVerdict(w.index, decision, _shift(correction) @ T_wall_from_projector, loop, correction, trusted,
+                           cut_by)
 
     def _closed_loop(self, k: int, drawn: NDArray[np.float64], T_wall_from_robot: NDArray[np.float64]
                      ) -> registration.ClosedLoopResult:

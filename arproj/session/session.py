@@ -77,6 +77,7 @@ class Registration:
     # another wall's σ is drawn from them as this wall's is (registration.pose_sigma_on_wall_m)
     pose_covariance: NDArray[np.float64] | None = None
     frame_sigma_m: float = 0.0
+    cut_by: str = ""  # what cuts the map (registration.why_cut): the largest term where the bound is too large
 
 
 @dataclass
@@ -319,20 +320,25 @@ class ProjectionSession:
         # far points, and a heading or pitch error moves every point by the distance to the wall)
         pose_sigma = None if fused.covariance is None else \
             registration.pose_sigma_on_wall_m(drawn, T_wall_from_robot, fused.covariance)
-        local = registration.local_registration_sigma_m(
+        terms = registration.registration_sigma_terms(
             plane.centre_distance_95_m, plane.normal_95_deg, T_wall_from_projector, drawn, aim[:2],
             in_plane_sigma if pose_sigma is None else fused.frame_sigma_m, footprint, calib_px, roll_sigma_rad,
             pose_sigma_m=pose_sigma)
+        local = terms.total
         trusted = registration.trusted_region(drawn, local, self.tolerance_m)
+        cut_by = registration.why_cut(terms, drawn, ~registration.within_tolerance(local, self.tolerance_m),
+                                      T_wall_from_robot, fused.covariance)
         sigma = trusted.sigma_m if trusted.usable else (float(local.max()) if len(local) else float("inf"))
         laser_offset = None if scan is None else registration.laser_plane_offset_m(T_wall_from_robot, scan, aim[0])
         self.registration = Registration(head, T_wall_from_robot, T_wall_from_projector, plane, sigma, source,
                                          distance, inc, footprint, scan, laser_offset, trusted,
                                          in_plane_sigma_m=in_plane_sigma, roll_sigma_rad=roll_sigma_rad,
                                          calibration_px=calib_px, pose_covariance=fused.covariance,
-                                         frame_sigma_m=fused.frame_sigma_m)
+                                         frame_sigma_m=fused.frame_sigma_m, cut_by=cut_by)
         self.log.append(f"wall pose: {plane.corners} corners, σ {sigma * 1000:.2f} mm on the wall, "
                         f"{distance:.2f} m at {inc:.0f}°, in-plane from {source}")
+        if cut_by:
+            self.log.append(f"map cut to {100 * trusted.share:.0f} % by {cut_by}")
         return self.registration
 
     def verify(self) -> registration.ClosedLoopResult | None:

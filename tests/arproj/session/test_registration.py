@@ -147,3 +147,34 @@ def test_pose_sigma_on_wall_is_how_far_robot_fixed_wall_points_move_and_counts_p
     old = registration.local_registration_sigma_m(0.0, 0.0, T, np.array([[1.5, 0.0]]), np.array([1.5, 0.0]),
                                                   0.0, 0.001, 0.0, roll_sigma_rad=np.radians(0.05))
     assert old[0] == 0.0
+
+
+def test_pose_sigma_with_a_dof_known_is_the_conditional_spread_and_the_terms_name_the_largest():
+    from geometry.poses import pose_from_vector
+
+    T = _T_wall_from_robot()
+    points = np.array([[1.5, 1.2], [3.0, 1.8], [0.4, 0.6]])
+    robot_points = transform_points(invert(T), np.column_stack([points, np.zeros(len(points))]))
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(6, 6)) * np.array([1e-3, 1e-3, 2e-3, 2e-3, 2e-3, 2e-3])
+    cov = A @ A.T
+    known = registration.pose_sigma_on_wall_m(points, T, cov, known=("rotation about the wall's normal",))
+    # the spread of the draws whose rotation about the wall's normal is (nearly) nil: the conditional spread
+    draws = rng.multivariate_normal(np.zeros(6), cov, 200_000)
+    roll = (T[:3, :3] @ draws[:, :3].T)[2]
+    keep = draws[np.abs(roll) < 0.02 * roll.std()]
+    moved = np.array([transform_points(T @ pose_from_vector(d), robot_points)[:, :2] - points for d in keep])
+    assert known == pytest.approx(np.sqrt((moved ** 2).sum(axis=2).mean(axis=0)), rel=0.1)
+    assert np.all(known < registration.pose_sigma_on_wall_m(points, T, cov))
+    # a pose whose only uncertainty is the roll about the normal: nothing left once the roll is known
+    only_roll = np.zeros((6, 6))
+    only_roll[:3, :3] = T[:3, :3].T @ np.diag([0.0, 0.0, np.radians(0.1) ** 2]) @ T[:3, :3]
+    assert registration.pose_sigma_on_wall_m(points, T, only_roll, known=("rotation about the wall's normal",)) \
+        == pytest.approx(0.0, abs=1e-9)  # nanometres: the round-off of subtracting the roll's share
+    pose = registration.pose_sigma_on_wall_m(points, T, only_roll)
+    terms = registration.registration_sigma_terms(0.001, 0.05, T, points, points[0], 0.0, 0.001, 0.1,
+                                                  pose_sigma_m=pose)
+    assert terms.total == pytest.approx(registration.local_registration_sigma_m(
+        0.001, 0.05, T, points, points[0], 0.0, 0.001, 0.1, pose_sigma_m=pose))
+    name, share = terms.largest()
+    assert name == "pose" and 0.5 < share <= 1.0

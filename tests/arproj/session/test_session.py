@@ -152,3 +152,22 @@ def test_marks_no_camera_can_photograph_leave_the_map_unchecked_and_refused(runn
     assert loop is not None and len(loop.marks_xy) >= tol.CLOSED_LOOP_MIN_FEATURES and not loop.seen.any()
     refused = gate.decide(session.evidence(), tol.REGISTRATION_TOLERANCE_M)
     assert not refused.show_map and any(r.startswith("pattern lost: 0 of") for r in refused.reasons)
+
+
+def test_the_bound_covers_the_true_error_and_names_what_cuts_the_map(running):
+    from arproj.session import registration, scenarios
+    from arproj.session import tolerances as tol
+
+    site, _, session, _, decision = running
+    reg = session.registration
+    trusted = reg.trusted
+    assert decision.show_map and trusted is not None and trusted.points_xy is not None
+    # every drawn sample's true error (the pose before the loop's correction) inside its own 95 % bound
+    T_uncorrected = make_pose(None, [-reg.correction_xy[0], -reg.correction_xy[1], 0.0]) @ reg.T_wall_from_projector
+    belief = scenarios.Belief(session.rig, reg.T_wall_from_robot, T_uncorrected, reg.sigma_m, reg.distance_m)
+    errors = scenarios.true_errors(belief, scenarios.truth_of(site, 0), trusted.points_xy)
+    assert np.all(errors <= tol.Z95 * trusted.point_sigma_m)
+    # the robot's roll is known from the floor alone (no wall edge in view at 2.2 m): the fused pose cuts the map
+    # there, and knowing its tilts (an inclinometer) would shrink the bound
+    assert trusted.share < 1.0 and reg.cut_by.startswith("the pose term")
+    assert f"the pose's {registration.POSE_DOFS[2]} known" in reg.cut_by and "inclinometer" in reg.cut_by
