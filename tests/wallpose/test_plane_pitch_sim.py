@@ -1,6 +1,9 @@
-"""The wall plane's pitch at 4 m on the simulated site (issue 20's half-pixel target): with the whole pattern
-on the wall the fitted normal is right to 0.01°; with the pattern's top rows over the wall's top edge (on the
-ceiling, the bench's default aim at 4 m) its tilt about the wall's horizontal axis is several times that."""
+"""The wall plane's pitch at 4 m on the simulated site with the perfect rig (issue 20's half-pixel target). In a
+room tall enough that the whole pattern lands on the wall: aimed at 1.2 m (the head almost level) the fitted
+normal is right to 0.01°; aimed at the scene's 1.4 m (the head tilted up 1.7-2.3°) it tilts about the wall's
+horizontal axis by up to 0.055° (seeds 0-3: -0.035, -0.014, -0.055, -0.005°). The corners' disparity error
+then grows over the image rows by 0.03-0.05 px per 1000 px (level: under 0.01), a 0.01-0.02 px trend that the
+0.2 m stereo baseline turns into the tilt; the bench's default aim at 4 m is this case."""
 
 import numpy as np
 import pytest
@@ -10,36 +13,34 @@ from wallpose.estimate import estimate_plane
 from wallpose.pattern import choose_pattern
 
 pytestmark = pytest.mark.gl
-ROOM = {"corners_m": [[8.0, 0.0], [0.0, 0.0], [0.0, 6.0], [8.0, 6.0]]}  # arproj.bench.projection.BENCH_ROOM
+# arproj.bench.projection.BENCH_ROOM, 3.4 m high instead of 2.6 m: no corner lands on the ceiling
+TALL_ROOM = {"corners_m": [[8.0, 0.0], [0.0, 0.0], [0.0, 6.0], [8.0, 6.0]], "height_m": 3.4}
 MAX_PITCH_DEG = 0.03  # ≈ 2 mm at 4 m: what half a projector pixel (1.2 mm there) can spare of it
+SEED = 2
 
 
-def _pitch_error_and_share_off_wall(gl_context: object, seed: int, aim_height_m: float | None) -> tuple[float, float]:
-    """(the fitted normal's error about the wall's horizontal axis in degrees, share of the pattern's corners
-    that land off wall 0), from the perfect rig's view at 4 m facing the wall."""
+def _pitch_error_deg(gl_context: object, aim_height_m: float | None) -> float:
+    """The fitted normal's error about the wall's horizontal axis (degrees), the perfect rig at 4 m facing the
+    wall, aimed at aim_height_m (None: the scene's default)."""
     from arproj.sim import Site
 
-    with Site.build(seed=seed, ctx=gl_context, room=ROOM, robot={"distance_m": 4.0, "incidence_deg": 0.0}) as site:
+    with Site.build(seed=SEED, ctx=gl_context, room=TALL_ROOM,
+                    robot={"distance_m": 4.0, "incidence_deg": 0.0}) as site:
         if aim_height_m is not None:
             site.place_robot(4.0, 0.0, aim_height_m=aim_height_m)
         views = calibrated_views(site)
         pattern = choose_pattern(views, 4.0, 0.0)
-        off_wall = np.asarray(site.raycast("projector", pattern.corner_projector_px).wall_index).reshape(-1) != 0
-        est = estimate_plane(*photograph_pair(site, pattern.image(), np.random.default_rng(seed)), pattern, views)
-        truth = wall_truth(site)
-        return float(np.degrees(est.normal[2] - truth.normal[2])), float(off_wall.mean())  # robot z is up
+        assert np.all(np.asarray(site.raycast("projector", pattern.corner_projector_px).wall_index) == 0)
+        est = estimate_plane(*photograph_pair(site, pattern.image(), np.random.default_rng(SEED)), pattern, views)
+        return float(np.degrees(est.normal[2] - wall_truth(site).normal[2]))  # robot z is up
 
 
-def test_pitch_at_4_m_with_the_pattern_on_the_wall(gl_context) -> None:
-    pitch, off_wall = _pitch_error_and_share_off_wall(gl_context, 0, 1.2)
-    assert off_wall == 0.0  # the case is what it claims to be
-    assert abs(pitch) < MAX_PITCH_DEG
+def test_pitch_at_4_m_aimed_level(gl_context) -> None:
+    assert abs(_pitch_error_deg(gl_context, 1.2)) < MAX_PITCH_DEG
 
 
-@pytest.mark.xfail(strict=True, reason="issue 20: with the pattern's top over the wall's edge the normal tilts "
-                   "-0.025…-0.067° at 4 m (seeds 0-3, all corners off the wall already rejected; leaving out the "
-                   "rows next to the edge does not remove it); cause not located")
-def test_pitch_at_4_m_with_the_pattern_over_the_top_edge(gl_context) -> None:
-    pitch, off_wall = _pitch_error_and_share_off_wall(gl_context, 0, None)
-    assert off_wall > 0.1  # the bench's default aim at 4 m: the top rows land on the ceiling
-    assert abs(pitch) < MAX_PITCH_DEG
+@pytest.mark.xfail(strict=True, reason="issue 20: aimed 0.2 m higher (head tilted up ~2°) the 4 m plane tilts "
+                   "-0.055° (this seed) from a 0.01-0.02 px trend of the corners' disparity over the rows; "
+                   "cause not located (simulated image formation or the corner refinement)")
+def test_pitch_at_4_m_aimed_at_the_scene_height(gl_context) -> None:
+    assert abs(_pitch_error_deg(gl_context, None)) < MAX_PITCH_DEG
