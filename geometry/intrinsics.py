@@ -87,6 +87,8 @@ class Intrinsics:
     def project(self, points_cam: ArrayLike, distort: bool = True) -> NDArray[np.float64]:
         """Pixels (n, 2) of points (n, 3) in this camera's (OpenCV) frame, via cv2.projectPoints."""
         p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
+        if len(p) == 0:  # cv2.projectPoints gives a single value for no points, not (0, 2)
+            return np.zeros((0, 2))
         dist = self.dist_array if distort else np.zeros(5)
         uv, _ = cv2.projectPoints(p, np.zeros(3), np.zeros(3), self.K, dist)
         return np.asarray(uv, dtype=np.float64).reshape(-1, 2)

@@ -79,6 +79,13 @@ def test_rays_invert_projection_with_distortion() -> None:
     np.testing.assert_allclose(rays, p, atol=1e-9)  # undistortion iterates to 1e-12 px; 1e-9 x 900 px = 1e-6 px
 
 
+def test_no_points_project_to_no_pixels() -> None:
+    # the closed loop asks which of no candidate marks are in view (a small trusted region far away)
+    intr = Intrinsics(900, 905, 700.3, 620.7, 1280, 800, (-0.25, 0.09, 0.001, -0.0005, -0.01))
+    for distort in (True, False):
+        assert intr.project(np.zeros((0, 3)), distort=distort).shape == (0, 2)
+
+
 def test_scaled_keeps_the_optics() -> None:
     intr = Intrinsics(900, 900, 639.5, 399.5, 1280, 800)
     half = intr.scaled(0.5)

@@ -1,0 +1,53 @@
+"""The wall plane's pitch at 4 m on the simulated site with the perfect rig (issue 20's half-pixel target). In a
+room tall enough that the whole pattern lands on the wall: aimed at 1.2 m (the head almost level) the fitted
+normal is right to 0.01°; aimed at the scene's 1.4 m (the head tilted up 1.7-2.3°) it tilts about the wall's
+horizontal axis by up to 0.055° (seeds 0-3: -0.035, -0.014, -0.055, -0.005°). The corners' disparity error
+then grows over the image rows by 0.03-0.05 px per 1000 px (level: under 0.01), a 0.01-0.02 px trend that the
+0.2 m stereo baseline turns into the tilt; the bench's default aim at 4 m is this case. With neither lens
+distorting (cameras' and projector's coefficients zero) the same aim is right to 0.005° again: the trend comes
+with the lens models (not with blur, sensor noise or the detector's rectifying-map step, which change nothing)."""
+
+import numpy as np
+import pytest
+
+from arproj.sim.wallpose_trial import calibrated_views, photograph_pair, wall_truth
+from wallpose.estimate import estimate_plane
+from wallpose.pattern import choose_pattern
+
+pytestmark = pytest.mark.gl
+# arproj.bench.projection.BENCH_ROOM, 3.4 m high instead of 2.6 m: no corner lands on the ceiling
+TALL_ROOM = {"corners_m": [[8.0, 0.0], [0.0, 0.0], [0.0, 6.0], [8.0, 6.0]], "height_m": 3.4}
+MAX_PITCH_DEG = 0.03  # ≈ 2 mm at 4 m: what half a projector pixel (1.2 mm there) can spare of it
+SEED = 2
+
+
+def _pitch_error_deg(gl_context: object, aim_height_m: float | None, **scene: object) -> float:
+    """The fitted normal's error about the wall's horizontal axis (degrees), the perfect rig at 4 m facing the
+    wall, aimed at aim_height_m (None: the scene's default); scene: more section overrides."""
+    from arproj.sim import Site
+
+    with Site.build(seed=SEED, ctx=gl_context, room=TALL_ROOM,
+                    robot={"distance_m": 4.0, "incidence_deg": 0.0}, **scene) as site:
+        if aim_height_m is not None:
+            site.place_robot(4.0, 0.0, aim_height_m=aim_height_m)
+        views = calibrated_views(site)
+        pattern = choose_pattern(views, 4.0, 0.0)
+        assert np.all(np.asarray(site.raycast("projector", pattern.corner_projector_px).wall_index) == 0)
+        est = estimate_plane(*photograph_pair(site, pattern.image(), np.random.default_rng(SEED)), pattern, views)
+        return float(np.degrees(est.normal[2] - wall_truth(site).normal[2]))  # robot z is up
+
+
+def test_pitch_at_4_m_aimed_level(gl_context) -> None:
+    assert abs(_pitch_error_deg(gl_context, 1.2)) < MAX_PITCH_DEG
+
+
+def test_pitch_at_4_m_aimed_at_the_scene_height_without_lens_distortion(gl_context) -> None:
+    no_distortion = {"dist": [0.0, 0.0, 0.0, 0.0, 0.0]}
+    assert abs(_pitch_error_deg(gl_context, None, cameras=no_distortion, projector=no_distortion)) < 0.01
+
+
+@pytest.mark.xfail(strict=True, reason="issue 20: aimed 0.2 m higher (head tilted up ~2°) the 4 m plane tilts "
+                   "-0.055° (this seed) from a 0.01-0.02 px trend of the corners' disparity over the rows; "
+                   "it goes with the lens distortions (the test above), cause not located further")
+def test_pitch_at_4_m_aimed_at_the_scene_height(gl_context) -> None:
+    assert abs(_pitch_error_deg(gl_context, None)) < MAX_PITCH_DEG
