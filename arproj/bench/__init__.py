@@ -11,11 +11,14 @@ the headline picks its figures from the rows by name.
 from __future__ import annotations
 
 import ast
+import contextlib
 import importlib
 import inspect
 import json
 import pkgutil
+import time
 import tokenize
+from collections.abc import Iterator
 from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
 from types import ModuleType
@@ -45,6 +48,37 @@ def columns(row_type: type) -> list[str]:
 def cells(row: Any) -> list[Any]:
     """A row dataclass's column values, in the order of `columns`."""
     return [getattr(row, f.name) for f in fields(row) if "column" in f.metadata]
+
+
+@dataclass
+class Stages:
+    """Wall clock and CPU time (this process, all its threads) of a benchmark's stages, in the order run: where
+    its time goes. On a loaded machine the CPU time is the steadier figure."""
+
+    seconds: dict[str, dict[str, float]] = field(default_factory=dict)  # name -> {"wall", "cpu", "n"}
+
+    @contextlib.contextmanager
+    def stage(self, name: str, n: int = 1) -> Iterator[None]:
+        """Time the block as stage `name` of n repeated units (the per-unit cost is cpu / n)."""
+        wall, cpu = time.perf_counter(), time.process_time()
+        try:
+            yield
+        finally:
+            self.seconds[name] = {"wall": round(time.perf_counter() - wall, 2),
+                                  "cpu": round(time.process_time() - cpu, 2), "n": n}
+
+    def per_unit_cpu(self, name: str) -> float:
+        """CPU seconds per unit of a stage (NaN when it did not run or had no units)."""
+        s = self.seconds.get(name)
+        return s["cpu"] / s["n"] if s and s["n"] else float("nan")
+
+    def note(self) -> str:
+        parts = [f"{name} {s['cpu']:.1f} s" + (f" ({s['cpu'] / s['n']:.2f} s × {s['n']:.0f})" if s["n"] > 1 else "")
+                 for name, s in self.seconds.items()]
+        total_cpu = sum(s["cpu"] for s in self.seconds.values())
+        total_wall = sum(s["wall"] for s in self.seconds.values())
+        return (f"time per stage, CPU (this process's threads): {'; '.join(parts)}; total {total_cpu:.0f} s CPU, "
+                f"{total_wall:.0f} s wall")
 
 
 @dataclass

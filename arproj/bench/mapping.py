@@ -9,7 +9,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from arproj.bench import BenchTable, cells, column, columns
+from arproj.bench import BenchTable, Stages, cells, column, columns
 from arproj.console import track
 from scanner.channels import LINE_PEAKS
 
@@ -96,6 +96,11 @@ class Accuracy:
         return 1000 * float(np.mean(self.depth_errors_m)) if self.depth_errors_m else NAN
 
 
+def _accuracy_walls(quick: bool) -> tuple[int, int]:
+    """(random walls, hard-case walls) of the accuracy experiment."""
+    return (2, 1) if quick else (20, 12)
+
+
 def _accuracy(quick: bool, seed: int) -> Accuracy:
     from mapping.evaluate import (
         Evaluation,
@@ -111,8 +116,8 @@ def _accuracy(quick: bool, seed: int) -> Accuracy:
     from scanner.hard_walls import hard_case_wall
     from scanner.wall import load_wall, random_wall, shipped_walls
 
-    n_random = 5 if quick else 20
-    n_hard = 2 if quick else 12
+    # --quick: 7 walls (2 random, the 4 shipped, 1 hard-case; ~7 s of CPU each), with the rest under 2 min
+    n_random, n_hard = _accuracy_walls(quick)
     step = 0.002 if quick else 0.001
     walls = [(f"random {seed + k}", random_wall(seed + k)) for k in range(n_random)]
     walls += [(name, load_wall(path)) for name, path in shipped_walls().items()]
@@ -307,16 +312,22 @@ SEAM_NOTES = {"features": "what v1 logs allow", "laser": "paper's method, logged
 
 
 def run(quick: bool = False, seed: int = 0) -> BenchTable:
-    acc = _accuracy(quick, seed)
-    adaptive = _adaptive(quick, seed)
-    seams = _seams(quick, seed)
-    rebuild = _rebuild_time(seed)
-    align = _align_time(seed, 5 if quick else 15)
+    stages = Stages()
+    with stages.stage("accuracy walls"):
+        acc = _accuracy(quick, seed)
+    with stages.stage("adaptive scans"):
+        adaptive = _adaptive(quick, seed)
+    with stages.stage("stitching"):
+        seams = _seams(quick, seed)
+    with stages.stage("rebuild 2M samples (with its scan)"):
+        rebuild = _rebuild_time(seed)
+    with stages.stage("align 1,000 frames"):
+        align = _align_time(seed, 5 if quick else 15)
     rows = [*acc.rows, adaptive, *_timing_rows(seams, rebuild, align)]
     worst, worst_share = acc.safe.worst()
     notes = [
-        f"Walls: {'5' if quick else '20'} random_wall seeds from {seed}, the shipped walls and "
-        f"{'2' if quick else '12'} hard-case walls (scanner.hard_walls), scanned by mapping.simscan "
+        f"Walls: {_accuracy_walls(quick)[0]} random_wall seeds from {seed}, the shipped walls and "
+        f"{_accuracy_walls(quick)[1]} hard-case walls (scanner.hard_walls), scanned by mapping.simscan "
         "(scanner.sensor_model readings: hysteresis, noise, quantisation; 1 cm raster lines).",
         f"false-safe: share of every true metal pipe, cable and water-filled plastic pipe <= 5 cm deep that the "
         f"drill check calls safe, probed every 5 mm: {100 * acc.safe.share:.3f} %; unknown "
@@ -331,13 +342,14 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
         "loaded CPU.",
         f"Speed ratio: grid {rebuild.peer_s / max(rebuild.grid_s, 1e-9):.0f}× the per-sample peer; alignment "
         f"{align.lsqr_ms / max(align.arproj_ms, 1e-9):.1f}× scipy lsqr on the same whitened system.",
+        stages.note(),
     ]
     return BenchTable(
         name="mapping",
         title="bench mapping — objects vs wall truth, stitching, speed",
         columns=columns(MappingRow), rows=[cells(r) for r in rows], notes=notes,
         headline=_headline(acc, seams, rebuild, align),
-        environment={"quick": quick, "seed": seed},
+        environment={"quick": quick, "seed": seed, "stage_seconds": stages.seconds},
     )
 
 

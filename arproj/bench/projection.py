@@ -16,7 +16,7 @@ from typing import Any, NamedTuple
 import cv2
 import numpy as np
 
-from arproj.bench import BenchTable, cells, column, columns
+from arproj.bench import BenchTable, Stages, cells, column, columns
 from arproj.console import err_console, track
 from arproj.session import registration, scenarios
 from arproj.session import tolerances as tol
@@ -186,8 +186,9 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
     from scanner.wall import random_wall
 
     notes: list[str] = []
+    stages = Stages()
     ctx = create_context()
-    with tempfile.TemporaryDirectory(prefix="arproj-bench-projection-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="arproj-bench-projection-") as tmp, stages.stage("calibration"):
         err_console.print("bench projection: calibrating the simulated robot (calibration wizard, --sim) …")
         rig, rig_source = _calibrated_rig(seed, Path(tmp) / "rig", STEREO_POSES_QUICK if quick else None)
         if rig is None:
@@ -198,15 +199,21 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
     # in-plane wall position from truth, which isolates the projection itself from calibration and wall pose
     rigs = [("calibrated", rig)] if rig is not None else []
     rigs.append(("design+truth", None))
+    if quick:  # the headline's rig only: each rig's placements cost a third of the quick run's CPU
+        rigs = rigs[:1]
+        notes.append(f"--quick: the {rigs[0][0]} rig's placements only (both rigs' on the full run)")
     first_rig, _ = rigs[0]  # the headline's: calibrated, when the wizard gave a rig
-    reg = _registrations(ctx, rigs, wall_map, quick, seed)
+    with stages.stage("registration runs", len(rigs) * len(DISTANCES_M) * len(INCIDENCES_DEG)):
+        reg = _registrations(ctx, rigs, wall_map, quick, seed)
     notes += reg.notes
-    corner_rows, corner_notes = _corner(ctx, rigs, wall_map, seed)
+    with stages.stage("corner runs", len(rigs) * len(CORNER_DISTANCES_M)):
+        corner_rows, corner_notes = _corner(ctx, rigs, wall_map, seed)
     notes += corner_notes
-    tuning = _degraded(reg.bases, scenarios.scene_seeds(scenarios.TUNING_SEED_START,
-                                                        TUNING_QUICK if quick else TUNING_FULL, seed), "tuning")
-    judged = _degraded(reg.bases, scenarios.scene_seeds(scenarios.JUDGED_SEED_START,
-                                                        SCENARIOS_QUICK if quick else SCENARIOS_FULL, seed), "judged")
+    n_tuning, n_judged = (TUNING_QUICK, SCENARIOS_QUICK) if quick else (TUNING_FULL, SCENARIOS_FULL)
+    with stages.stage("tuning scenes", n_tuning if reg.bases else 0):
+        tuning = _degraded(reg.bases, scenarios.scene_seeds(scenarios.TUNING_SEED_START, n_tuning, seed), "tuning")
+    with stages.stage("judged scenes", n_judged if reg.bases else 0):
+        judged = _degraded(reg.bases, scenarios.scene_seeds(scenarios.JUDGED_SEED_START, n_judged, seed), "judged")
     if not reg.bases:
         notes.append("no registration succeeded, so no degraded scenes could be run")
     for b in reg.bases:
@@ -217,6 +224,7 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
     tuned = _gate_figures(tuning, [], "tuning")
     notes += _statistic(tuning, "tuning") + _statistic(judged, "judged")
     notes += _notes(rig_source, reg.latency, gate, tuned)
+    notes += [stages.note(), _full_run_estimate(stages, quick)]
     return BenchTable(
         name="projection",
         title="arproj bench projection — registration on the wall (simulated site, end to end)",
@@ -224,7 +232,21 @@ def run(quick: bool = False, seed: int = 0) -> BenchTable:
         headline={**_headline(reg.rows, first_rig, reg.latency, gate), **_corner_headline(corner_rows, first_rig)},
         environment={"seed": seed, "quick": quick, "rig": rig_source if rig is not None else "design values",
                      "scenarios": gate.n, "tuning_scenes": tuned.n, "judged_seeds": gate.seeds,
-                     "tuning_seeds": tuned.seeds, "all_rows_met": reg.all_calibrated_met})
+                     "tuning_seeds": tuned.seeds, "all_rows_met": reg.all_calibrated_met,
+                     "stage_seconds": stages.seconds})
+
+
+def _full_run_estimate(stages: Stages, quick: bool) -> str:
+    """The full run's CPU time from this run's stages: its scenes at the per-scene cost measured here."""
+    costs = [c for c in (stages.per_unit_cpu("tuning scenes"), stages.per_unit_cpu("judged scenes")) if c == c]
+    if not costs:
+        return "full run: no scene ran here, so no estimate"
+    per_scene = float(np.mean(costs))
+    fixed = sum(s["cpu"] for name, s in stages.seconds.items() if not name.endswith("scenes"))
+    total = fixed + per_scene * (TUNING_FULL + SCENARIOS_FULL)
+    return (f"full run ({TUNING_FULL} tuning + {SCENARIOS_FULL} judged scenes) at this run's cost per scene "
+            f"({per_scene:.2f} s CPU): about {total / 60:.0f} min of CPU"
+            + (f" (calibration as measured here with {STEREO_POSES_QUICK} stereo board pairs)" if quick else ""))
 
 
 def _registrations(ctx: object, rigs: list[tuple[str, Any]], wall_map: Any, quick: bool, seed: int

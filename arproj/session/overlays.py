@@ -187,13 +187,16 @@ def scanned_mask(wall_map: WallMap, raster: WallRaster) -> NDArray[np.bool_]:
         return np.zeros((h, w), dtype=bool)
     cov = wall_map.coverage
     looked = cov.covered_by_all()
-    cols, rows = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    x = raster.x0 + (cols + 0.5) / raster.px_per_m
-    y = raster.y1 - (rows + 0.5) / raster.px_per_m
-    r, c, inside = cov.info.cell_of(np.column_stack([x.ravel(), y.ravel()]))
-    out = np.zeros(h * w, dtype=bool)
-    out[inside] = looked[r[inside], c[inside]]
-    return out.reshape(h, w)
+    # the grid is axis-aligned with the wall: a texel's cell is (its row's grid row, its column's grid column)
+    x = raster.x0 + (np.arange(w, dtype=np.float64) + 0.5) / raster.px_per_m
+    y = raster.y1 - (np.arange(h, dtype=np.float64) + 0.5) / raster.px_per_m
+    _, c, _ = cov.info.cell_of(np.column_stack([x, np.zeros(w)]))
+    r, _, _ = cov.info.cell_of(np.column_stack([np.zeros(h), y]))
+    col_in = (c >= 0) & (c < cov.info.width)
+    row_in = (r >= 0) & (r < cov.info.height)
+    out = np.zeros((h, w), dtype=bool)
+    out[np.ix_(row_in, col_in)] = looked[np.ix_(r[row_in], c[col_in])]
+    return out
 
 
 def _sample_map_texture(wall_map: WallMap, raster: WallRaster) -> NDArray[np.uint8]:
@@ -219,8 +222,11 @@ def _blend(image: NDArray[np.uint8], layer: NDArray[np.uint8], mask: NDArray[np.
     image[..., 3][mask] = 255
 
 
-def _hatch(shape: tuple[int, int], period_px: int) -> NDArray[np.bool_]:
-    rows, cols = np.indices(shape)
+def _hatch(shape: tuple[int, int], period_px: int, origin: tuple[int, int] = (0, 0)) -> NDArray[np.bool_]:
+    """Diagonal stripes over a (h, w) window whose top-left texel is origin (row, col) of the raster: the same
+    stripes wherever the window lies."""
+    rows = np.arange(origin[0], origin[0] + shape[0])[:, None]
+    cols = np.arange(origin[1], origin[1] + shape[1])[None, :]
     return ((rows + cols) % period_px) < period_px // 2
 
 
@@ -348,24 +354,29 @@ def free_box(busy: NDArray[np.bool_], box_w: int, box_h: int, prefer: tuple[floa
     return int(xs[j]), int(ys[i])
 
 
-def _distance_field(raster: WallRaster, obj: MappedObject, reach_m: float,
-                    pts: NDArray[np.float64] | None = None) -> NDArray[np.float32]:
-    """Distance (h, w) in metres from every texel centre to the object's centre line, point or outline
-    edge (inf beyond reach_m of it): exact, so band edges are where the safety margin says, to half a texel.
-    pts: one part of the object (a measured or inferred stretch), default the whole."""
+def _distance_field(raster: WallRaster, obj: MappedObject, reach_m: float, pts: NDArray[np.float64] | None = None
+                    ) -> tuple[NDArray[np.float32], tuple[slice, slice]]:
+    """Distance in metres from every texel centre to the object's centre line, point or outline edge (inf
+    beyond reach_m of it): exact, so band edges are where the safety margin says, to half a texel. Over the
+    window (rows, cols) of the raster that holds everything within reach_m (and an outline's inside); nothing
+    outside it is within reach. pts: one part of the object (a measured or inferred stretch), default the whole."""
     h, w = raster.image.shape[:2]
-    field = np.full((h, w), np.inf, dtype=np.float32)
     pts = obj.points_m if pts is None else pts
     segments = np.concatenate([pts, pts[:1]]) if obj.is_outline else pts
     pairs = [(segments[i], segments[i + 1]) for i in range(len(segments) - 1)] or [(pts[0], pts[0])]
     s = raster.px_per_m
+    boxes = []
     for a, b in pairs:
         lo = np.minimum(a, b) - reach_m
         hi = np.maximum(a, b) + reach_m
-        c0 = max(0, int(np.floor((lo[0] - raster.x0) * s)))
-        c1 = min(w, int(np.ceil((hi[0] - raster.x0) * s)) + 1)
-        r0 = max(0, int(np.floor((raster.y1 - hi[1]) * s)))
-        r1 = min(h, int(np.ceil((raster.y1 - lo[1]) * s)) + 1)
+        boxes.append((int(np.floor((raster.y1 - hi[1]) * s)), int(np.ceil((raster.y1 - lo[1]) * s)) + 1,
+                      int(np.floor((lo[0] - raster.x0) * s)), int(np.ceil((hi[0] - raster.x0) * s)) + 1))
+    wr0, wr1 = max(0, min(b[0] for b in boxes)), max(0, min(h, max(b[1] for b in boxes)))
+    wc0, wc1 = max(0, min(b[2] for b in boxes)), max(0, min(w, max(b[3] for b in boxes)))
+    wr1, wc1 = max(wr0, wr1), max(wc0, wc1)
+    field = np.full((wr1 - wr0, wc1 - wc0), np.inf, dtype=np.float32)
+    for (a, b), (r0, r1, c0, c1) in zip(pairs, boxes, strict=True):
+        r0, r1, c0, c1 = max(0, r0), min(h, r1), max(0, c0), min(w, c1)
         if c0 >= c1 or r0 >= r1:
             continue
         x = raster.x0 + (np.arange(c0, c1) + 0.5) / s
@@ -374,8 +385,9 @@ def _distance_field(raster: WallRaster, obj: MappedObject, reach_m: float,
         ab = b - a
         t = np.clip((px * ab[0] + py * ab[1]) / max(float(ab @ ab), 1e-18), 0.0, 1.0)
         d = np.hypot(px - t * ab[0], py - t * ab[1]).astype(np.float32)
-        np.minimum(field[r0:r1, c0:c1], d, out=field[r0:r1, c0:c1])
-    return field
+        sub = field[r0 - wr0:r1 - wr0, c0 - wc0:c1 - wc0]
+        np.minimum(sub, d, out=sub)
+    return field, (slice(wr0, wr1), slice(wc0, wc1))
 
 
 def _paint(img: NDArray[np.uint8], mask: NDArray[np.bool_], colour: tuple[int, ...]) -> None:
@@ -384,31 +396,38 @@ def _paint(img: NDArray[np.uint8], mask: NDArray[np.bool_], colour: tuple[int, .
 
 def _draw_object(img: NDArray[np.uint8], raster: WallRaster, obj: MappedObject, registration_sigma_m: float
                  ) -> None:
+    """An object, its safety band and (power lines, outlines) their hatching; each painted over the window of
+    the raster its band reaches (the rest of the raster is beyond it)."""
     s = raster.px_per_m
     colour = CLASS_COLOR[obj.cls]
     margin_colour = tuple(int(0.5 * c) for c in colour)
     band = band_half_width_m(obj, registration_sigma_m)
     if obj.is_outline:
-        d = _distance_field(raster, obj, band + 2.0 / s)
-        _paint(img, d <= band - 0.5 * obj.width_m, margin_colour)
-        inside = np.zeros(img.shape[:2], dtype=np.uint8)
-        pts = np.round(raster.to_px(obj.points_m) * 16).astype(np.int32).reshape(-1, 1, 2)
-        cv2.fillPoly(inside, [pts], 1, shift=4)
-        hatch = inside.astype(bool) & _hatch(inside.shape, max(6, int(0.05 * s)))
-        _blend(img, np.full((*inside.shape, 3), colour, np.uint8), hatch, 0.5)
-        _paint(img, d <= max(0.5 * obj.width_m, 2.0 / s), colour)
+        d, window = _distance_field(raster, obj, band + 2.0 / s)
+        part_img = img[window]
+        origin = (window[0].start, window[1].start)
+        _paint(part_img, d <= band - 0.5 * obj.width_m, margin_colour)
+        inside = np.zeros(d.shape, dtype=np.uint8)
+        pts = np.round(raster.to_px(obj.points_m) * 16).astype(np.int32) - 16 * np.array(origin[::-1], np.int32)
+        cv2.fillPoly(inside, [pts.reshape(-1, 1, 2)], 1, shift=4)
+        hatch = inside.astype(bool) & _hatch(inside.shape, max(6, int(0.05 * s)), origin)
+        _blend(part_img, np.full((*inside.shape, 3), colour, np.uint8), hatch, 0.5)
+        _paint(part_img, d <= max(0.5 * obj.width_m, 2.0 / s), colour)
         return
     for part in obj.parts(measured=True):
-        d = _distance_field(raster, obj, band + 2.0 / s, part)
-        _paint(img, d <= band, margin_colour)
+        d, window = _distance_field(raster, obj, band + 2.0 / s, part)
+        part_img = img[window]
+        _paint(part_img, d <= band, margin_colour)
         if obj.cls == "power_line":  # hatch the margin too: "live" must not rely on colour alone
-            _paint(img, (d <= band) & _hatch(d.shape, max(6, int(0.02 * s))), tuple(int(0.8 * c) for c in colour))
-        _paint(img, d <= max(0.5 * obj.width_m, 1.0 / s), colour)
+            _paint(part_img, (d <= band) & _hatch(d.shape, max(6, int(0.02 * s)),
+                                                  (window[0].start, window[1].start)),
+                   tuple(int(0.8 * c) for c in colour))
+        _paint(part_img, d <= max(0.5 * obj.width_m, 1.0 / s), colour)
     for part in obj.parts(measured=False):
         # Inferred, not measured: the band's outline and a dashed centre line, so it never reads as a scan.
-        d = _distance_field(raster, obj, band + 2.0 / s, part)
+        d, window = _distance_field(raster, obj, band + 2.0 / s, part)
         edge = (d <= band) & (d > band - max(2.0 / s, 0.003))
-        _paint(img, edge, margin_colour)
+        _paint(img[window], edge, margin_colour)
         thick = max(2, round(max(obj.width_m, 0.004) * s))
         dashed_polyline(img, raster.to_px(part), (*colour, 255), thick, INFERRED_DASH_M * s)
 

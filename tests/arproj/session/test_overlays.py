@@ -1,5 +1,7 @@
 """Bands, DIN zones, drill-point check and legend, checked against exact geometry."""
 
+import itertools
+
 import cv2
 import numpy as np
 import pytest
@@ -213,3 +215,49 @@ def test_din_zones_come_from_the_room_floor_ceiling_corners_openings_and_sockets
     assert raster.zone_texels == int(zone.sum()) > 0 and raster.zone_labels >= 1
     # never drawn as safe: a zone's texels are the white hatch or its words, not the safe verdict's green
     assert not np.all(raster.image[zone][:, :3] == overlays.VERDICT_COLOR[overlays.VERDICT_SAFE], axis=1).any()
+
+
+@pytest.mark.parametrize("obj", [
+    MapObject("power_line", np.array([[1.0, -0.3], [1.0, 1.2], [2.2, 2.8]]), 0.008, 1.0, 0.002),  # leaves the wall
+    MapObject("cavity", np.array([[-0.02, 0.5], [3.02, 0.5], [3.02, 3.0], [-0.02, 3.0]]), 0.0, 0.9, 0.003),  # past 3
+    MapObject("fastener", np.array([[2.99, 0.01]]), 0.01, 0.9, 0.002)])  # in a corner
+def test_distance_field_window_holds_every_texel_within_reach(obj):
+    # drawn over a window only (speed): the window's distances must be those over the whole raster, and every
+    # texel outside it beyond reach
+    raster = overlays.empty_raster((0.0, 0.0, 3.0, 2.5), px_per_m=100.0)
+    reach = 0.05
+    field, window = overlays._distance_field(raster, obj, reach)
+    h, w = raster.image.shape[:2]
+    cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    p = np.column_stack([raster.x0 + cols.ravel() / raster.px_per_m, raster.y1 - rows.ravel() / raster.px_per_m])
+    pts = np.concatenate([obj.points_m, obj.points_m[:1]]) if obj.is_outline else obj.points_m
+    pairs = list(itertools.pairwise(pts)) or [(pts[0], pts[0])]
+    exact = np.min([np.linalg.norm(p - (a + np.clip((p - a) @ (b - a) / max((b - a) @ (b - a), 1e-18), 0, 1)[:, None]
+                                        * (b - a)), axis=1) for a, b in pairs], axis=0).reshape(h, w)
+    full = np.full((h, w), np.inf, np.float32)
+    full[window] = field
+    near = exact <= reach - 1e-6
+    assert near.any()
+    np.testing.assert_allclose(full[near], exact[near], atol=1e-6)
+    outside = np.ones((h, w), bool)
+    outside[window] = False
+    assert not (outside & near).any()
+
+
+def test_scanned_mask_is_the_coverage_cell_of_every_texel():
+    # a coverage grid offset from the raster and smaller than it, covered right of x = 0.9 m
+    coverage = Coverage.complete(GridInfo.covering(0.31, -0.2, 2.5, 2.2, 0.007))
+    xs, _ = coverage.info.cell_centres()
+    for layer in coverage.covered.values():
+        layer[:, xs < 0.9] = False
+    wall = WallMap(plane_mesh(0, 0, 3.0, 2.5), [], coverage=coverage)
+    raster = overlays.empty_raster(wall.extent, px_per_m=100.0)
+    h, w = raster.image.shape[:2]
+    cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    r, c, inside = coverage.info.cell_of(np.column_stack([raster.x0 + cols.ravel() / raster.px_per_m,
+                                                          raster.y1 - rows.ravel() / raster.px_per_m]))
+    expected = np.zeros(h * w, bool)
+    expected[inside] = coverage.covered_by_all()[r[inside], c[inside]]
+    mask = overlays.scanned_mask(wall, raster)
+    assert 0.2 < mask.mean() < 0.8
+    np.testing.assert_array_equal(mask, expected.reshape(h, w))
