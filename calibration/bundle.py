@@ -22,6 +22,7 @@ from scipy.optimize._numdiff import approx_derivative, group_columns
 from calibration.camera_model import DISTORTION_MODELS, dist5_from, project
 from geometry.intrinsics import Intrinsics
 from geometry.poses import pose_from_rvec_tvec, rotation_matrices, rotation_matrix, rvec_tvec_from_pose
+from geometry.threads import single_threaded
 
 BA_TOLERANCE = 1e-10
 BA_MAX_EVALUATIONS = 200
@@ -153,8 +154,12 @@ def bundle_adjust(cameras: list[Intrinsics], models: list[str], observations: li
     def jacobian(x: NDArray[np.float64]) -> NDArray[np.float64]:
         return approx_derivative(problem.residuals, x, method="2-point", sparsity=(sparsity, groups)).toarray()
 
-    fit = least_squares(problem.residuals, x_start, jac=jacobian, method="trf", x_scale="jac", ftol=BA_TOLERANCE,
-                        xtol=BA_TOLERANCE, gtol=BA_TOLERANCE, tr_solver="exact", max_nfev=BA_MAX_EVALUATIONS)
+    # BLAS on one thread: the exact solver's SVD of a few thousand rows by a few dozen columns cost 45x its
+    # single-thread CPU on OpenBLAS's threads on a loaded 2-core machine (geometry.threads).
+    with single_threaded():
+        fit = least_squares(problem.residuals, x_start, jac=jacobian, method="trf", x_scale="jac",
+                            ftol=BA_TOLERANCE, xtol=BA_TOLERANCE, gtol=BA_TOLERANCE, tr_solver="exact",
+                            max_nfev=BA_MAX_EVALUATIONS)
     x = fit.x
     out_cams = []
     for cam, intr in enumerate(cameras):
@@ -171,7 +176,8 @@ def bundle_adjust(cameras: list[Intrinsics], models: list[str], observations: li
         bounds = np.cumsum([0, *[len(observations[k].object_points) for k in idx]])
         for k, a, b in zip(idx, bounds[:-1], bounds[1:], strict=True):
             residuals[k] = r[a:b]
-    cov = _covariance(fit.fun, jacobian(x))
+    with single_threaded():
+        cov = _covariance(fit.fun, jacobian(x))
     return BundleResult(out_cams, T10, poses, [residuals[k] for k in range(len(observations))],
                         _intrinsics_sigma(problem, cov), cov[:problem.pose_offset, :problem.pose_offset],
                         _parameter_names(problem, models), list(models), fixed)

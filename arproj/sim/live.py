@@ -68,6 +68,8 @@ DISPLAY_LATENCY_S = 0.05  # a beamer shows a frame a little after it was sent
 STREAM_SNDBUF_BYTES = 16384  # small: a stalled reader finds at most about one frame queued
 JPEG_QUALITY = 95
 HEAD_SYNC_S = 0.01  # how often the worker follows the head simulator's physical angles
+CLOSE_WAIT_S = 10.0  # SpawnedLiveSite.close: how long the site may take to end once its stdin is closed,
+TERMINATE_WAIT_S = 5.0  # and then after SIGTERM, before it is killed
 # The stereo pair as mounted is off its drawing by this (σ per axis, in the robot frame) and this: what the mount
 # calibration has to find; the build tolerance it assumes (calibration.laser_mount.DESIGN_SIGMA_*) is the same.
 MOUNT_ERROR_DEG = 0.5
@@ -515,10 +517,14 @@ class SpawnedLiveSite:
             with contextlib.suppress(OSError):
                 self.process.stdin.close()
         try:
-            self.process.wait(timeout=10)
+            self.process.wait(timeout=CLOSE_WAIT_S)
         except subprocess.TimeoutExpired:
             self.process.terminate()
-            self.process.wait(timeout=5)
+            try:
+                self.process.wait(timeout=TERMINATE_WAIT_S)
+            except subprocess.TimeoutExpired:  # a loaded machine: the calibration it served is done, so end it
+                self.process.kill()
+                self.process.wait()
 
     def __enter__(self) -> SpawnedLiveSite:
         return self

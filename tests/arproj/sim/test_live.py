@@ -39,3 +39,24 @@ def test_screen_frames_reach_the_cameras_and_stale_frames_are_skipped() -> None:
 def test_screen_url_must_be_tcp() -> None:
     with pytest.raises(InputError, match="tcp://HOST:PORT"):
         ScreenStream("http://127.0.0.1:1")
+
+
+def test_a_spawned_site_that_ignores_its_stdin_and_sigterm_is_killed_on_close(monkeypatch: pytest.MonkeyPatch
+                                                                              ) -> None:
+    # On a loaded machine a site once outlived both waits: close() raised TimeoutExpired and the finished
+    # calibration it had served was lost with it. A stand-in process that ignores both signals is killed instead.
+    import subprocess
+    import sys
+
+    import arproj.sim.live as live_module
+
+    monkeypatch.setattr(live_module, "CLOSE_WAIT_S", 0.2)
+    monkeypatch.setattr(live_module, "TERMINATE_WAIT_S", 0.2)
+    stubborn = ("import signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); print('up', flush=True); "
+                "time.sleep(60)")
+    site = live_module.SpawnedLiveSite.__new__(live_module.SpawnedLiveSite)
+    site.process = subprocess.Popen([sys.executable, "-c", stubborn], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                    text=True)
+    assert site.process.stdout is not None and site.process.stdout.readline() == "up\n"  # SIGTERM now ignored
+    site.close()
+    assert site.process.returncode is not None and site.process.returncode < 0
