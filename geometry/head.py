@@ -23,6 +23,17 @@ from geometry.poses import invert, make_pose, rotation_matrices
 JOINT_NAMES = ("pan", "tilt", "roll")
 
 
+@dataclass(frozen=True)
+class JointSlip:
+    """HeadModel.joint_slip: the pan and tilt change (degrees) that explains a measured projector pose best,
+    and the rotation (degrees) and translation (metres) of that pose no joint change explains."""
+
+    pan_deg: float
+    tilt_deg: float
+    unexplained_deg: float
+    unexplained_m: float
+
+
 @dataclass
 class HeadModel:
     """axes, points: (3, 3) in the robot frame; zero_offsets_deg: (3,); T_robot_from_projector_zero: 4x4."""
@@ -56,6 +67,31 @@ class HeadModel:
         still on it, T_head_from_projector = T_robot_from_head⁻¹ · T_robot_from_projector whatever the angles)."""
         turned = self.T_robot_from_projector(angles_deg) @ invert(self.T_robot_from_projector_zero)
         return turned @ make_pose(None, self.points[1])
+
+    def joint_slip(self, angles_deg: ArrayLike, T_robot_from_projector_measured: ArrayLike,
+                   rotation_sigma_deg: float, translation_sigma_m: float) -> JointSlip:
+        """The pan and tilt change that best explains a measured projector pose at the reported angles — a
+        mount that slipped on its joints moves the projector only so — and what it leaves unexplained. The two
+        parts of the residual are weighed by their σ (how well the measurement knows each)."""
+        from scipy.optimize import least_squares
+
+        from geometry.poses import rotation_vector
+
+        reported = np.asarray(angles_deg, dtype=np.float64).reshape(-1)
+        T_meas = np.asarray(T_robot_from_projector_measured, dtype=np.float64)
+
+        def parts(change: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+            T = self.T_robot_from_projector([reported[0] + change[0], reported[1] + change[1], 0.0])
+            return rotation_vector(T[:3, :3].T @ T_meas[:3, :3]), T_meas[:3, 3] - T[:3, 3]
+
+        def residual(change: NDArray[np.float64]) -> NDArray[np.float64]:
+            rot, trans = parts(change)
+            return np.concatenate([rot / np.radians(rotation_sigma_deg), trans / translation_sigma_m])
+
+        change = least_squares(residual, np.zeros(2)).x
+        rot, trans = parts(change)
+        return JointSlip(float(change[0]), float(change[1]), float(np.degrees(np.linalg.norm(rot))),
+                         float(np.linalg.norm(trans)))
 
     def to_dict(self) -> dict:
         return {

@@ -44,12 +44,23 @@ class RegistrationEvidence:
     head_command_error_deg: float = 0.0
     closed_loop_errors_m: NDArray[np.float64] | None = None  # (k,) per seen check mark
     closed_loop_expected: int = 0
+    # the affine error field the marks measured, at its worst over the drawn area (marks cover only part of it)
+    closed_loop_field_max_m: float = float("nan")
     stereo_residual_px: float | None = None
     robot_motion_m: float = 0.0
     robot_motion_significant: bool = True  # beyond the scan match's own noise (ScanMotion.significant); unknown: yes
     laser_plane_offset_m: float | None = None  # laser returns vs the camera-measured wall (rig/mount check)
     head_failure: str | None = None
+    rig_failure: str | None = None  # the rig file cannot describe this robot (registration refused)
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def closed_loop_worst_m(self) -> float:
+        """The loop's worst error on the drawn area: its worst mark, or the measured field's worst where larger."""
+        if self.closed_loop_errors_m is None or not len(self.closed_loop_errors_m):
+            return 0.0
+        worst = float(np.max(self.closed_loop_errors_m))
+        return max(worst, self.closed_loop_field_max_m) if np.isfinite(self.closed_loop_field_max_m) else worst
 
 
 # What the craftsman at the wall reads on the warning frame: what happened, in plain words, and what to do.
@@ -60,6 +71,8 @@ SAY_HEAD_MOVED = "The projector head has moved. Wait until this warning goes."
 SAY_ROBOT_MOVED = "The robot has moved. Do not touch it while it measures again."
 SAY_PATTERN_HIDDEN = "The check marks are hidden. Step out of the beam."
 SAY_RIG = "The robot's cameras or laser disagree. Call the operator."
+SAY_LASER = ("The cameras and the laser see the wall in different places. Clear the space before the wall; "
+             "if this stays, call the operator.")
 
 
 def _say_off_by(mm: float) -> str:
@@ -86,8 +99,10 @@ def decide(ev: RegistrationEvidence, tolerance_m: float = tol.REGISTRATION_TOLER
 
     if ev.pose_failure:
         fail(f"wall pose unknown: {ev.pose_failure}", SAY_NO_WALL_POSE)
-    if ev.pose_sigma_m is None and not ev.pose_failure:
+    if ev.pose_sigma_m is None and not ev.pose_failure and not ev.rig_failure:
         fail("wall pose not estimated yet", SAY_NO_WALL_POSE)
+    if ev.rig_failure:
+        fail(f"rig in doubt: {ev.rig_failure}", SAY_RIG)
     if ev.head_failure:
         fail(f"head not answering: {ev.head_failure.split(' — ')[0]}", SAY_HEAD_SILENT)
     if ev.head_command_error_deg > HEAD_COMMAND_TOLERANCE_DEG:
@@ -101,14 +116,14 @@ def decide(ev: RegistrationEvidence, tolerance_m: float = tol.REGISTRATION_TOLER
         if seen < max(tol.CLOSED_LOOP_MIN_FEATURES, MIN_VISIBLE_FRACTION * ev.closed_loop_expected):
             fail(f"pattern lost: {seen} of {ev.closed_loop_expected} check marks seen", SAY_PATTERN_HIDDEN)
         elif ev.closed_loop_errors_m is not None:
-            loop_max = float(np.max(ev.closed_loop_errors_m))  # the worst mark: the map must hold everywhere
+            loop_max = ev.closed_loop_worst_m  # the worst mark or field: the map must hold everywhere
             if loop_max > tolerance_m:
                 fail(f"projection lands up to {loop_max * 1000:.0f} mm off where it should (head slipped, "
                      "projector moved or wrong rig)", _say_off_by(loop_max * 1000))
     if ev.laser_plane_offset_m is not None and np.isfinite(ev.laser_plane_offset_m) and \
             ev.laser_plane_offset_m > LASER_PLANE_TOLERANCE_M:
-        fail(f"laser and cameras disagree about the wall by {ev.laser_plane_offset_m * 1000:.0f} mm: wrong rig "
-             "file or a camera moved?", SAY_RIG)
+        fail(f"laser and cameras disagree about the wall by {ev.laser_plane_offset_m * 1000:.0f} mm: something "
+             "before the wall where the pattern fell, a wrong rig file or a camera moved?", SAY_LASER)
     if ev.stereo_residual_px is not None and ev.stereo_residual_px > STEREO_RESIDUAL_MAX_PX:
         fail(f"cameras disagree with the rig file (residual {ev.stereo_residual_px:.1f} px): wrong or outdated "
              "rig?", SAY_RIG)

@@ -458,6 +458,23 @@ def lone_outliers(marks_xy: NDArray[np.float64], errors_xy: NDArray[np.float64],
     return out
 
 
+def field_worst_m(marks_xy: NDArray[np.float64], errors_xy: NDArray[np.float64], points_xy: NDArray[np.float64]
+                  ) -> float:
+    """The worst error over points_xy (the drawn area) of the affine error field the marks measured.
+
+    The marks the cameras can photograph cover only part of what is drawn (at 60° the far end lies outside one
+    camera's view). A slipped head or a moved projector errs smoothly over the wall, growing away from the
+    aim point, so the worst measured mark understates the error where no mark could go; the field fitted to
+    the marks tells it there. NaN with too few marks to fit it (the gate then refuses: pattern lost)."""
+    marks_xy = np.asarray(marks_xy, dtype=np.float64).reshape(-1, 2)
+    errors_xy = np.asarray(errors_xy, dtype=np.float64).reshape(-1, 2)
+    points_xy = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    if len(errors_xy) < tol.CLOSED_LOOP_MIN_FEATURES or not len(points_xy):
+        return float("nan")
+    field_ = np.linalg.lstsq(np.column_stack([marks_xy, np.ones(len(marks_xy))]), errors_xy, rcond=None)[0]
+    return float(np.linalg.norm(np.column_stack([points_xy, np.ones(len(points_xy))]) @ field_, axis=1).max())
+
+
 def _ray_plane_xy(camera: Intrinsics, uv: NDArray[np.float64], T_wall_from_camera: NDArray[np.float64]
                   ) -> NDArray[np.float64]:
     """Wall (x, y) where each camera pixel's ray meets the wall plane z = 0."""
@@ -514,22 +531,31 @@ LASER_SEARCH_M = 0.6          # no wall return near the plane: the nearest retur
 
 
 def laser_plane_offset_m(T_wall_from_robot: NDArray[np.float64], laser_points_robot: NDArray[np.float64],
-                         centre_x: float) -> float:
+                         centre_x: float, plane_covariance: NDArray[np.float64] | None = None) -> float:
     """How far (metres) the 2D laser's returns from this wall lie off the wall frame the cameras measured,
     near the projected area: the offset at centre_x plus the slope over LASER_WINDOW_M (robust line fit).
 
     Camera-measured plane and laser both live in the robot frame, so a camera mount that differs from the rig
-    file (or a bumped camera) shows up here. When the laser sees something along the wall but nothing near the
-    plane — the cameras measured a board or sheet before the wall as the wall — the median distance of the
-    returns within LASER_SEARCH_M behind or before it is the disagreement; NaN when the laser sees nothing there.
+    file (or a bumped camera) shows up here, and so does a pattern that fell partly on a board before the wall
+    (the plane fitted through both tilts off the wall). T_wall_from_robot must be the cameras' plane alone: a
+    pose fused with the laser already leans towards it and hides the disagreement. plane_covariance: the
+    plane's (4, 4) covariance of (normal, distance) in the robot frame; the disagreement is then what lies
+    beyond the plane's own 95 % error at the window's ends and centre (a plane measured at 4 m is known less
+    well). When the laser sees through the plane — more returns well behind it than on it, the cameras
+    measured a person or a board before the wall — their median distance is the disagreement; so it is when
+    the laser sees nothing near the plane but returns within LASER_SEARCH_M of it; NaN when it sees nothing.
     """
     p = np.asarray(laser_points_robot, dtype=np.float64)
     if p.shape[1] == 2:
         raise ValueError("laser points need their height: pass (n, 3) robot-frame points")
     w = transform_points(T_wall_from_robot, p)
-    near = (np.abs(w[:, 2]) < LASER_NEAR_WALL_M) & (np.abs(w[:, 0] - centre_x) < LASER_WINDOW_M)
+    window = np.abs(w[:, 0] - centre_x) < LASER_WINDOW_M
+    near = (np.abs(w[:, 2]) < LASER_NEAR_WALL_M) & window
+    behind = (w[:, 2] < -LASER_NEAR_WALL_M) & window
+    if behind.sum() >= max(LASER_MIN_POINTS, near.sum()):
+        return float(np.median(-w[behind, 2]))
     if near.sum() < LASER_MIN_POINTS:
-        around = (np.abs(w[:, 2]) < LASER_SEARCH_M) & (np.abs(w[:, 0] - centre_x) < LASER_WINDOW_M)
+        around = (np.abs(w[:, 2]) < LASER_SEARCH_M) & window
         return float(np.median(np.abs(w[around, 2]))) if around.sum() >= LASER_MIN_POINTS else float("nan")
     x, z = w[near, 0] - centre_x, w[near, 2]
 
@@ -543,4 +569,12 @@ def laser_plane_offset_m(T_wall_from_robot: NDArray[np.float64], laser_points_ro
     line, _ = refine(np.ones(len(z), dtype=bool), refit, rounds=3)
     assert line is not None  # without min_inliers every round fits
     a, b = line
-    return float(abs(a) + abs(b) * LASER_WINDOW_M)
+    along = np.array([-LASER_WINDOW_M, 0.0, LASER_WINDOW_M])
+    offsets = np.abs(a + b * along)
+    if plane_covariance is not None:
+        # the plane's own 1σ offset at those points (at the laser's height), g·C·g with g = (X, 1)
+        ends = np.column_stack([centre_x + along, np.full(3, np.median(w[near, 1])), np.zeros(3)])
+        g = np.column_stack([transform_points(invert(T_wall_from_robot), ends), np.ones(3)])
+        sd = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", g, np.asarray(plane_covariance), g), 0.0))
+        offsets = np.maximum(offsets - tol.Z95 * sd, 0.0)
+    return float(offsets.max())

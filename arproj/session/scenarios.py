@@ -158,6 +158,7 @@ class Station:
         """Back to the registered state (the site's physical state is restored by each scene's undo)."""
         self.session.registration = copy.deepcopy(self.snapshot)
         self.session.pose_failure = None
+        self.session.rig_failure = None
 
 
 def judge(session: ProjectionSession, site: SiteTruth, wall_index: int = 0

@@ -35,6 +35,7 @@ from geometry.rig import Rig
 from wallpose.edges import camera_images
 from wallpose.estimate import PlaneEstimate, StereoDraw, Uncertainty, estimate_plane
 from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
+from wallpose.limits import MAX_NUISANCE_SIGMAS
 from wallpose.pattern import choose_pattern
 from wallpose.pose import estimate_wall_pose
 from wallpose.rig import ViewRig
@@ -138,6 +139,7 @@ class ProjectionSession:
         self.registration: Registration | None = None
         self.pose_failure: str | None = None
         self.head_failure: str | None = None
+        self.rig_failure: str | None = None  # the rig file cannot describe this robot (see _not_a_head_slip)
         self.drill_xy: NDArray[np.float64] | None = None
         self.last_decision: gate.GateDecision | None = None
         self.last_evidence: gate.RegistrationEvidence | None = None
@@ -273,12 +275,14 @@ class ProjectionSession:
         incidence_guess = float(np.degrees(np.arctan2(-n_p[0], -n_p[2])))
         self.registration = None
         self.head_slipped = False
+        self.rig_failure = None
+        uncertainty = self._uncertainty()
         try:
             pattern = choose_pattern(views, distance_guess, incidence_guess)
             left, right = self.robot.capture(pattern.image())
             self.last_pattern_capture = (pattern, left, right, head)
             try:
-                plane = estimate_plane(left, right, pattern, views, uncertainty=self._uncertainty())
+                plane = estimate_plane(left, right, pattern, views, uncertainty=uncertainty)
             except NotEnoughEvidenceError as err:
                 if err.code != EvidenceCode.PROJECTOR_POSE_OFF:
                     raise
@@ -291,6 +295,10 @@ class ProjectionSession:
                 self.log.append(f"head model disagrees with the pattern (projector "
                                 f"{plane.projector_correction_deg:.2f}° / {plane.projector_correction_m * 1000:.1f} mm "
                                 "off): its pose was measured from the pattern instead — recalibrate the head")
+                self.rig_failure = self._not_a_head_slip(head, views, plane, uncertainty)
+                if self.rig_failure:
+                    self.log.append(f"rig in doubt: {self.rig_failure}")
+                    return None
         except InputError as err:  # the estimator's "not enough evidence" (or pictures that do not fit the rig)
             self.pose_failure = _why_declined(err)
             self.log.append(f"wall pose: {self.pose_failure}")
@@ -329,7 +337,10 @@ class ProjectionSession:
         cut_by = registration.why_cut(terms, drawn, ~registration.within_tolerance(local, self.tolerance_m),
                                       T_wall_from_robot, fused.covariance)
         sigma = trusted.sigma_m if trusted.usable else (float(local.max()) if len(local) else float("inf"))
-        laser_offset = None if scan is None else registration.laser_plane_offset_m(T_wall_from_robot, scan, aim[0])
+        # the laser against the cameras' plane alone (the fused pose already holds the laser)
+        laser_offset = None if scan is None else registration.laser_plane_offset_m(
+            registration.snap_to_plane(T_wall_from_robot, plane.normal, plane.distance), scan, aim[0],
+            plane.covariance)
         self.registration = Registration(head, T_wall_from_robot, T_wall_from_projector, plane, sigma, source,
                                          distance, inc, footprint, scan, laser_offset, trusted,
                                          in_plane_sigma_m=in_plane_sigma, roll_sigma_rad=roll_sigma_rad,
@@ -340,6 +351,27 @@ class ProjectionSession:
         if cut_by:
             self.log.append(f"map cut to {100 * trusted.share:.0f} % by {cut_by}")
         return self.registration
+
+    def _not_a_head_slip(self, head: tuple[float, float], views: ViewRig, plane: PlaneEstimate,
+                         uncertainty: Uncertainty) -> str | None:
+        """Why the projector's pose measured from the pattern cannot be a slipped head (None: it can).
+
+        A mount that slipped turns the projector about the head's joints; a camera mount, projector lens or
+        head that differs from the rig file moves it otherwise. Such a rig measures the wall and the projector
+        in the same wrong frame, so the closed loop finds nothing amiss while the map lands centimetres off:
+        what no turn of the head explains, beyond the head model's own prior, refuses the registration."""
+        assert self.rig.head is not None
+        slip = self.rig.head.joint_slip(head, views.T_robot_from_camera_left @ plane.T_camera_left_from_projector,
+                                        uncertainty.projector_rotation_deg, uncertainty.projector_translation_m)
+        limit_deg = MAX_NUISANCE_SIGMAS * uncertainty.projector_rotation_deg
+        limit_m = MAX_NUISANCE_SIGMAS * uncertainty.projector_translation_m
+        if slip.unexplained_deg <= limit_deg and slip.unexplained_m <= limit_m:
+            return None
+        return (f"the projector sits {plane.projector_correction_deg:.2f}° / "
+                f"{1000 * plane.projector_correction_m:.1f} mm from where the head model puts it, and no turn of "
+                f"the head explains {slip.unexplained_deg:.2f}° / {1000 * slip.unexplained_m:.1f} mm of it (at most "
+                f"{limit_deg:.2f}° / {1000 * limit_m:.0f} mm): the rig file's camera mount, projector or head does "
+                "not fit this robot — recalibrate it (`arproj calibrate`)")
 
     def verify(self) -> registration.ClosedLoopResult | None:
         """The closed loop: project check marks, photograph them, measure where they landed, correct a small
@@ -403,7 +435,7 @@ class ProjectionSession:
     # -- evidence, gate, frame ------------------------------------------------------------------------------
     def evidence(self) -> gate.RegistrationEvidence:
         reg = self.registration
-        ev = gate.RegistrationEvidence(pose_failure=self.pose_failure)
+        ev = gate.RegistrationEvidence(pose_failure=self.pose_failure, rig_failure=self.rig_failure)
         now = self.head_deg()
         ev.head_failure = self.head_failure
         if reg is None:
@@ -421,12 +453,24 @@ class ProjectionSession:
             ev.closed_loop_expected = len(reg.loop.seen)
             ev.closed_loop_errors_m = np.linalg.norm(reg.loop.errors_xy - reg.correction_xy, axis=1)
             ev.stereo_residual_px = reg.loop.residual_px if reg.loop.seen.any() else None
+            ev.closed_loop_field_max_m = self._loop_field_max_m(reg)
         if reg.trusted is not None and ev.closed_loop_errors_m is not None and len(ev.closed_loop_errors_m):
             # the map only where the pose's 95 % error plus what the loop and the laser measured hold
             reg.trusted, reg.sigma_m = registration.checked_region(
-                reg.trusted, float(np.max(ev.closed_loop_errors_m)) + ev.robot_motion_m, self.tolerance_m)
+                reg.trusted, ev.closed_loop_worst_m + ev.robot_motion_m, self.tolerance_m)
             ev.pose_sigma_m = reg.sigma_m
         return ev
+
+    @staticmethod
+    def _loop_field_max_m(reg: Registration) -> float:
+        """The closed loop's error field (after its correction) at its worst over what is drawn: the trusted
+        region's sample points inside its polygon; NaN without a loop or without samples."""
+        region, loop = reg.trusted, reg.loop
+        if loop is None or region is None or region.points_xy is None:
+            return float("nan")
+        drawn = region.points_xy if region.polygon is None else \
+            region.points_xy[registration.inside_polygon(region.points_xy, region.polygon)]
+        return registration.field_worst_m(loop.marks_xy[loop.seen], loop.errors_xy - reg.correction_xy, drawn)
 
     def decide(self) -> gate.GateDecision:
         self.last_evidence = self.evidence()
@@ -477,8 +521,11 @@ class ProjectionSession:
             self.estimate()
         if self.closed_loop and self.registration is not None:
             loop = self.verify()
-            if loop is not None and loop.seen.sum() >= tol.CLOSED_LOOP_MIN_FEATURES and \
-                    np.linalg.norm(loop.offset_xy) > tol.CLOSED_LOOP_MAX_CORRECTION_M and not needs_estimate:
+            # off by more than a small shift, or by a shift that leaves the far part of the map off (the field
+            # the marks measured, after the correction): measure the wall pose again
+            if loop is not None and loop.seen.sum() >= tol.CLOSED_LOOP_MIN_FEATURES and not needs_estimate and \
+                    (np.linalg.norm(loop.offset_xy) > tol.CLOSED_LOOP_MAX_CORRECTION_M
+                     or self._loop_field_max_m(self.registration) > tol.CLOSED_LOOP_MAX_CORRECTION_M):
                 self.log.append("projection landed off: re-estimating the wall pose")
                 if self.estimate() is not None:
                     # the head reported no motion, yet the picture landed off: its mount slipped (or the

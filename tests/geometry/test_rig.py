@@ -125,3 +125,17 @@ def test_rig_written_before_rectification_still_reads(tmp_path: Path) -> None:
         assert P[0, 3] == 0.0
     back = Rig.load(tmp_path)
     assert back.intrinsics == rig.intrinsics
+
+
+def test_a_slipped_joint_is_explained_and_a_moved_projector_is_not() -> None:
+    head = _head()
+    reported = (12.0, -4.0)
+    # the mount slipped: the projector is where other joint angles put it
+    slipped = head.T_robot_from_projector([reported[0] + 0.4, reported[1] - 0.3, 0.0])
+    slip = head.joint_slip(reported, slipped, rotation_sigma_deg=0.2, translation_sigma_m=0.003)
+    assert slip.pan_deg == pytest.approx(0.4, abs=1e-4) and slip.tilt_deg == pytest.approx(-0.3, abs=1e-4)
+    assert slip.unexplained_deg < 1e-4 and slip.unexplained_m < 1e-6
+    # a camera mount or projector that differs from the model: 25 mm sideways, which no turn gives back
+    moved = make_pose(None, [0.0, 0.025, 0.0]) @ head.T_robot_from_projector([*reported, 0.0])
+    other = head.joint_slip(reported, moved, rotation_sigma_deg=0.2, translation_sigma_m=0.003)
+    assert other.unexplained_m > 0.012  # beyond 4σ of the head model's translation prior

@@ -129,5 +129,56 @@ def test_a_plane_measured_before_the_wall_is_a_laser_disagreement_not_a_missing_
     offset = registration.laser_plane_offset_m(board, laser, 1.5)
     assert offset == pytest.approx(0.14, abs=0.01)
     assert not gate.decide(_good(laser_plane_offset_m=offset)).show_map
-    far = make_pose(None, [0.0, 0.0, -2.0])  # nothing within reach of the plane at all: no laser check
-    assert np.isnan(registration.laser_plane_offset_m(far, laser, 1.5))
+    far = make_pose(None, [0.0, 0.0, -2.0])  # a plane 2 m before the wall: the laser sees the wall through it
+    assert registration.laser_plane_offset_m(far, laser, 1.5) == pytest.approx(2.0, abs=0.01)
+    # no return along the projected part of the wall at all: no laser check
+    assert np.isnan(registration.laser_plane_offset_m(np.eye(4), laser + np.array([10.0, 0.0, 0.0]), 1.5))
+
+
+def test_the_laser_judges_the_cameras_plane_within_its_own_uncertainty_and_sees_through_a_person():
+    from arproj.session import registration
+    from geometry.poses import make_pose, rotation_about
+
+    rng = np.random.default_rng(5)
+    x = np.linspace(-1.4, 1.4, 200)
+    laser = np.column_stack([x + 1.5, np.zeros_like(x), rng.normal(0, 0.005, len(x))])
+    # a plane tilted 0.6° about the vertical: 16 mm off the laser at the window's centre, 30 mm at its end
+    tilted = make_pose(rotation_about([0, 1, 0], np.radians(0.6)), [0.0, 0.0, 0.0])
+    off = registration.laser_plane_offset_m(tilted, laser, 1.5)
+    assert off > gate.LASER_PLANE_TOLERANCE_M
+    # a plane measured that loosely (1σ of 0.5° in its normal) may be that far off: no disagreement beyond it
+    loose = np.diag([np.radians(0.5) ** 2, 1e-12, np.radians(0.5) ** 2, 0.002 ** 2])
+    assert registration.laser_plane_offset_m(tilted, laser, 1.5, loose) < gate.LASER_PLANE_TOLERANCE_M
+    # one measured well (0.02°, 0.5 mm) may not
+    tight = np.diag([np.radians(0.02) ** 2, 1e-12, np.radians(0.02) ** 2, 0.0005 ** 2])
+    assert registration.laser_plane_offset_m(tilted, laser, 1.5, tight) > gate.LASER_PLANE_TOLERANCE_M
+    # the cameras measured a person 1 m before the wall: a few returns on them, most from the wall behind
+    person = np.column_stack([np.linspace(1.3, 1.7, 30), np.zeros(30), np.full(30, 1.0)])
+    seen = np.concatenate([laser[np.abs(laser[:, 0] - 1.5) > 0.25], person])
+    on_person = make_pose(None, [0.0, 0.0, -1.0])  # wall frame with z = 0 on the person
+    assert registration.laser_plane_offset_m(on_person, seen, 1.5) == pytest.approx(1.0, abs=0.02)
+
+
+def test_the_loop_judges_the_drawn_area_where_no_mark_could_go():
+    from arproj.session import registration
+
+    # marks over the near half of what is drawn; the error grows along the wall (a turn seen at an angle)
+    marks = np.array([[x, y] for x in np.linspace(0.0, 1.0, 6) for y in np.linspace(0.0, 0.6, 4)])
+    def field(p):
+        return np.column_stack([0.008 * p[:, 0], 0.002 * p[:, 0]]) - [0.004, 0.001]
+
+    drawn = np.array([[x, y] for x in np.linspace(0.0, 2.0, 11) for y in np.linspace(0.0, 0.6, 4)])
+    worst_mark = np.linalg.norm(field(marks), axis=1).max()
+    worst = registration.field_worst_m(marks, field(marks), drawn)
+    assert worst == pytest.approx(np.linalg.norm(field(drawn), axis=1).max(), rel=1e-6)
+    assert worst_mark < 0.005 < 0.010 < worst
+    ev = _good(closed_loop_errors_m=np.linalg.norm(field(marks), axis=1), closed_loop_field_max_m=worst)
+    decision = gate.decide(ev)
+    assert not decision.show_map and any("lands up to 12 mm off" in r for r in decision.reasons)
+    assert np.isnan(registration.field_worst_m(marks[:3], field(marks[:3]), drawn))  # too few marks to fit
+
+
+def test_a_rig_in_doubt_is_said_as_such():
+    decision = gate.decide(gate.RegistrationEvidence(rig_failure="the projector sits 1° off"))
+    assert not decision.show_map and decision.reasons == ["rig in doubt: the projector sits 1° off"]
+    assert decision.craftsman == [gate.SAY_RIG]

@@ -116,7 +116,7 @@ def test_warning_text_stays_inside_the_border_however_long(size):
 
     w, h = size
     messages = [gate.SAY_NO_WALL_POSE, gate.SAY_HEAD_SILENT, gate.SAY_ROBOT_MOVED, gate.SAY_PATTERN_HIDDEN,
-                gate.SAY_RIG, "The picture may be up to 12 mm off. Wait until this warning goes."]
+                gate.SAY_RIG, gate.SAY_LASER, "The picture may be up to 12 mm off. Wait until this warning goes."]
     frame = overlays.warning_frame(w, h, messages)
     border = max(8, min(w, h) // 40)
     text = np.any(frame != (255, 40, 40), axis=-1) & np.any(frame > 0, axis=-1)  # lit, not border red
