@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from geometry.errors import InputError
 from geometry.inputs import float_array
-from geometry.poses import invert, make_pose, rotation_matrices
+from geometry.poses import invert, make_pose, rotation_matrices, rotation_vector
 
 JOINT_NAMES = ("pan", "tilt", "roll")
 
@@ -73,9 +73,7 @@ class HeadModel:
         """The pan and tilt change that best explains a measured projector pose at the reported angles — a
         mount that slipped on its joints moves the projector only so — and what it leaves unexplained. The two
         parts of the residual are weighed by their σ (how well the measurement knows each)."""
-        from scipy.optimize import least_squares
-
-        from geometry.poses import rotation_vector
+        from scipy.optimize import least_squares  # here: geometry's import stays light for the CLI's start
 
         reported = np.asarray(angles_deg, dtype=np.float64).reshape(-1)
         T_meas = np.asarray(T_robot_from_projector_measured, dtype=np.float64)
