@@ -27,7 +27,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import t as student_t
+from scipy.stats import chi2
+from scipy.stats import f as f_dist
 
 from calibration.boards import Board, BoardView, detect, read_gray
 from calibration.bundle import Observation, bundle_adjust
@@ -482,6 +483,14 @@ def wall_inliers(points: NDArray[np.float64], tolerance_m: float = WALL_PLANE_TO
     return inliers
 
 
+def small_sample_widening(dims: int, dof: int, level: float = 0.95) -> float:
+    """How much wider a covariance estimated with `dof` degrees of freedom must be for its χ²_dims region at
+    `level` to hold that share: Hotelling's T² quantile over χ²'s (Student's t² over z² for one dimension)."""
+    dims = min(dims, dof)  # fewer samples than dimensions: their spread spans only dof directions
+    t2 = dof * dims / (dof - dims + 1) * float(f_dist.ppf(level, dims, dof - dims + 1))
+    return t2 / float(chi2.ppf(level, dims))
+
+
 @dataclass
 class ProjectorSamples:
     """Other outcomes the projector fit could have had, each (intrinsics, T_projector_from_view per pose):
@@ -491,18 +500,18 @@ class ProjectorSamples:
     jackknife: list[tuple[Intrinsics, list[NDArray[np.float64]]]]
     stereo: list[tuple[Intrinsics, list[NDArray[np.float64]]]]
 
-    def covariance(self, f: Callable[[Intrinsics, list[NDArray[np.float64]]], NDArray[np.float64]]
-                   ) -> NDArray[np.float64]:
-        """Covariance of f(intrinsics, poses): the jackknife's ((n-1)/n Σ), scaled by (t₀.₉₇₅,ₙ₋₁ / 1.96)² so
-        that its 1.96 σ is a 95 % bound despite its few degrees of freedom, plus the stereo draws' sample
-        covariance."""
+    def covariance(self, f: Callable[[Intrinsics, list[NDArray[np.float64]]], NDArray[np.float64]],
+                   dims: int = 1) -> NDArray[np.float64]:
+        """Covariance of f(intrinsics, poses): the jackknife's ((n-1)/n Σ), widened for its few degrees of
+        freedom, plus the stereo draws' sample covariance. dims: how many of f's values are judged together
+        (1: a scalar's ±1.96 σ; 3: a vector's χ²₃ ellipsoid); the widening makes that 95 % region a 95 % region
+        despite the n - 1 degrees of freedom: Student's t² for a scalar, Hotelling's T² for a vector."""
         out: NDArray[np.float64] | float = 0.0
         if len(self.jackknife) >= 2:
             v = np.array([f(*s) for s in self.jackknife])
             n = len(v)
             d = v - v.mean(axis=0)
-            factor = (float(student_t.ppf(0.975, n - 1)) / 1.96) ** 2
-            out = out + factor * (n - 1) / n * d.T @ d
+            out = out + small_sample_widening(dims, n - 1) * (n - 1) / n * d.T @ d
         if len(self.stereo) >= 2:
             out = out + np.atleast_2d(np.cov(np.array([f(*s) for s in self.stereo]), rowvar=False))
         return np.asarray(out, dtype=np.float64)

@@ -32,6 +32,7 @@ class JointSlip:
     tilt_deg: float
     unexplained_deg: float
     unexplained_m: float
+    unexplained_translation_m: NDArray[np.float64]  # (3,) in the robot frame: measured minus explained
 
 
 @dataclass
@@ -89,7 +90,7 @@ class HeadModel:
         change = least_squares(residual, np.zeros(2)).x
         rot, trans = parts(change)
         return JointSlip(float(change[0]), float(change[1]), float(np.degrees(np.linalg.norm(rot))),
-                         float(np.linalg.norm(trans)))
+                         float(np.linalg.norm(trans)), trans)
 
     def to_dict(self) -> dict:
         return {

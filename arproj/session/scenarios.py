@@ -103,7 +103,7 @@ class Outcome:
     true_mean_m: float
     bound_m: float       # the gate's 95 % bound (pose's 95 % error + the loop's worst mark + robot motion)
     loop_max_m: float    # the closed loop's worst check mark after its correction (NaN: no loop)
-    verified: bool       # the closed loop saw enough marks to judge (not "pattern lost", a pose was estimated)
+    verified: bool       # a pose was estimated (one refused for its rig too) and the pattern not lost
     shown_share: float = float("nan")  # share of the drawn area inside the trusted region
 
     @property
@@ -159,13 +159,14 @@ class Station:
         self.session.registration = copy.deepcopy(self.snapshot)
         self.session.pose_failure = None
         self.session.rig_failure = None
+        self.session.refused_registration = None
 
 
 def judge(session: ProjectionSession, site: SiteTruth, wall_index: int = 0
           ) -> tuple[float, float, float]:
     """(max, mean) true error (metres) of the registration the session holds, over the map's features and a
     grid over the drawn area inside the trusted region, and the region's share; NaN without a registration."""
-    reg = session.registration
+    reg = session.registration or session.refused_registration  # a refused rig: judged by what it would show
     if reg is None:
         return float("nan"), float("nan"), float("nan")
     intr = session.projector_intr
@@ -363,8 +364,9 @@ def _outcome(session: ProjectionSession, station: Station, scene: Scene, seed: i
     loop_max = float(np.max(loop)) if loop is not None and len(loop) else float("nan")
     lost = any(r.startswith(("pattern lost", "wall pose")) for r in decision.reasons)
     true_max, true_mean, share = judge(session, station.site, station.wall_index)
+    judged = session.registration is not None or session.refused_registration is not None
     return Outcome(scene.kind, scene.what, seed, decision.show_map, list(decision.reasons), true_max, true_mean,
-                   float(decision.bound_m), loop_max, session.registration is not None and not lost, share)
+                   float(decision.bound_m), loop_max, judged and not lost, share)
 
 
 def perturbed_rig(rig: Rig, variant: int, rng: np.random.Generator) -> tuple[Rig, str]:

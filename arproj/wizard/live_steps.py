@@ -196,7 +196,9 @@ def step_head_live(rig: Rig, out: Path, measurements: list[dict], T_robot_from_c
             out.append(np.concatenate([rotation_vector(T[:3, :3] @ T0[:3, :3].T), T[:3, 3]]))
         return np.concatenate(out)
 
-    shared = samples.covariance(predicted) if samples is not None else np.zeros((6 * len(check_angles),) * 2)
+    # each check angle's rotation and position are judged as 3-vectors (χ²₃ ellipsoids)
+    shared = samples.covariance(predicted, dims=3) if samples is not None else \
+        np.zeros((6 * len(check_angles),) * 2)
     per_angle = []
     for k, a in enumerate(check_angles):
         cov_rot, cov_pos = fit.pose_covariance(a)

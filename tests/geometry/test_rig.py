@@ -139,3 +139,4 @@ def test_a_slipped_joint_is_explained_and_a_moved_projector_is_not() -> None:
     moved = make_pose(None, [0.0, 0.025, 0.0]) @ head.T_robot_from_projector([*reported, 0.0])
     other = head.joint_slip(reported, moved, rotation_sigma_deg=0.2, translation_sigma_m=0.003)
     assert other.unexplained_m > 0.012  # beyond 4σ of the head model's translation prior
+    assert np.linalg.norm(other.unexplained_translation_m) == pytest.approx(other.unexplained_m)
