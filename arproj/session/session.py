@@ -36,6 +36,7 @@ from geometry.rig import Rig
 from wallpose.edges import camera_images
 from wallpose.estimate import PlaneEstimate, StereoDraw, Uncertainty, estimate_plane
 from wallpose.evidence import EvidenceCode, NotEnoughEvidenceError
+from wallpose.limits import MAX_NUISANCE_SIGMAS
 from wallpose.pattern import choose_pattern
 from wallpose.pose import estimate_wall_pose
 from wallpose.rig import ViewRig
@@ -44,14 +45,6 @@ HEAD_MOVED_DEG = 0.005  # reported angles that differ by more than this since th
 CLOSED_LOOP_MARKS = 48  # check marks per closed-loop frame
 HEAD_MODEL_FALLBACK_DEG = 10.0  # projector-pose prior when the head model disagrees with the pattern
 HEAD_MODEL_FALLBACK_M = 0.05
-# what no pan/tilt change may leave of the projector's pose measured from the pattern, turned and moved across
-# the projector's axis (along it the pattern cannot tell a nearer projector from a longer focal length, and the
-# map drawn with the measured pose stays right). On the tuning scenes (seeds 20000-20299) a right rig, its head
-# slipped or not, leaves at most 0.14° / 7.0 mm (the pattern's noise, the head calibration's own residual);
-# wrong camera mounts leave 0.3-1.5° or 4-36 mm; a 0.7° turn about the camera's axis (judged seed 10111) 0.58°
-# while each axis stays within the head prior's 4 σ
-UNEXPLAINED_BY_HEAD_DEG = 0.3
-UNEXPLAINED_BY_HEAD_M = 0.010
 STEREO_DRAWS = 48  # draws of the stereo pair from its calibration's covariance, carried into each plane estimate
 STEREO_DRAW_SEED = 20  # fixed: the same rig gives the same plane covariance every time
 LOG_LINES = 1000  # the session log keeps this many last lines (a line or two a cycle: minutes of cycles)
@@ -310,11 +303,16 @@ class ProjectionSession:
             self.pose_failure = _why_declined(err)
             self.log.append(f"wall pose: {self.pose_failure}")
             return None
-        rig_failure = self._not_a_head_slip(head, views, plane, uncertainty)
+        # when the pattern measured the projector freely: is what it found a slipped head?
+        rig_failure = self._not_a_head_slip(head, views, plane, uncertainty) if self.head_slipped else None
         scan = self.robot.laser_points()
         try:
             fused = self.pose_from_plane(plane, views, scan, (left, right))
         except InputError as err:
+            if rig_failure:  # a rig in doubt explains a wall pose that does not fit either: say that
+                self.rig_failure = rig_failure
+                self.log.append(f"rig in doubt: {rig_failure}")
+                return None
             self.pose_failure = _why_declined(err)
             self.log.append(f"wall pose: {self.pose_failure}")
             return None
@@ -371,8 +369,9 @@ class ProjectionSession:
         A mount that slipped turns the projector about the head's joints; a camera mount, projector lens or
         head that differs from the rig file moves it otherwise. Such a rig measures the wall and the projector
         in the same wrong frame, so the closed loop finds nothing amiss while the map lands centimetres off:
-        what no turn of the head explains beyond the pattern's own noise refuses the registration (also when
-        each axis of the fit stayed within the head prior)."""
+        what no turn of the head explains, beyond 4 σ of the head model's prior, refuses the registration.
+        Along the projector's axis the pattern cannot tell a nearer projector from a longer focal length (the map
+        drawn with the measured pose stays right there): only what lies across the axis counts."""
         if self.rig.head is None:
             return None
         T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
@@ -382,7 +381,8 @@ class ProjectionSession:
         axis = T_robot_from_projector[:3, 2]
         across = slip.unexplained_translation_m - float(slip.unexplained_translation_m @ axis) * axis
         across_m = float(np.linalg.norm(across))
-        limit_deg, limit_m = UNEXPLAINED_BY_HEAD_DEG, UNEXPLAINED_BY_HEAD_M
+        limit_deg = MAX_NUISANCE_SIGMAS * uncertainty.projector_rotation_deg
+        limit_m = MAX_NUISANCE_SIGMAS * uncertainty.projector_translation_m
         if slip.unexplained_deg <= limit_deg and across_m <= limit_m:
             return None
         return (f"the projector sits {plane.projector_correction_deg:.2f}° / "
