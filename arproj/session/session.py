@@ -30,7 +30,6 @@ from arproj.session.wallmap import WallMap
 from calibration.stereo import sample_stereo
 from devices.errors import DeviceError
 from geometry.errors import InputError
-from geometry.head import JointSlip
 from geometry.poses import invert, make_pose, transform_points
 from geometry.rig import Rig
 from wallpose.edges import camera_images
@@ -141,7 +140,6 @@ class ProjectionSession:
         self.pose_failure: str | None = None
         self.head_failure: str | None = None
         self.rig_failure: str | None = None  # the rig file cannot describe this robot (see _not_a_head_slip)
-        self.last_joint_slip: JointSlip | None = None  # the last estimate's projector pose against the head
         self.refused_registration: Registration | None = None  # the last estimate, when its rig was in doubt
         self.drill_xy: NDArray[np.float64] | None = None
         self.last_decision: gate.GateDecision | None = None
@@ -377,7 +375,6 @@ class ProjectionSession:
         T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
         slip = self.rig.head.joint_slip(head, T_robot_from_projector, uncertainty.projector_rotation_deg,
                                         uncertainty.projector_translation_m)
-        self.last_joint_slip = slip
         axis = T_robot_from_projector[:3, 2]
         across = slip.unexplained_translation_m - float(slip.unexplained_translation_m @ axis) * axis
         across_m = float(np.linalg.norm(across))
