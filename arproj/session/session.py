@@ -308,8 +308,7 @@ class ProjectionSession:
             fused = self.pose_from_plane(plane, views, scan, (left, right))
         except InputError as err:
             if rig_failure:  # a rig in doubt explains a wall pose that does not fit either: say that
-                self.rig_failure = rig_failure
-                self.log.append(f"rig in doubt: {rig_failure}")
+                self._refuse_rig(rig_failure)
                 return None
             self.pose_failure = _why_declined(err)
             self.log.append(f"wall pose: {self.pose_failure}")
@@ -351,14 +350,19 @@ class ProjectionSession:
                                          calibration_px=calib_px, pose_covariance=fused.covariance,
                                          frame_sigma_m=fused.frame_sigma_m, cut_by=cut_by)
         if rig_failure:  # kept aside, not used: what a refused rig would have shown (the bench judges it)
-            self.refused_registration, self.registration, self.rig_failure = self.registration, None, rig_failure
-            self.log.append(f"rig in doubt: {rig_failure}")
+            self.refused_registration, self.registration = self.registration, None
+            self._refuse_rig(rig_failure)
             return None
         self.log.append(f"wall pose: {plane.corners} corners, σ {sigma * 1000:.2f} mm on the wall, "
                         f"{distance:.2f} m at {inc:.0f}°, in-plane from {source}")
         if cut_by:
             self.log.append(f"map cut to {100 * trusted.share:.0f} % by {cut_by}")
         return self.registration
+
+    def _refuse_rig(self, why: str) -> None:
+        """No registration: the rig file does not describe this robot (the gate says so, "rig in doubt")."""
+        self.rig_failure = why
+        self.log.append(f"rig in doubt: {why}")
 
     def _not_a_head_slip(self, head: tuple[float, float], views: ViewRig, plane: PlaneEstimate,
                          uncertainty: Uncertainty) -> str | None:
