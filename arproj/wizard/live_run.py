@@ -171,4 +171,5 @@ def _calibrate(station: LiveStation, opts: LiveOptions, board: Any, rig: Rig, ri
     summary["head"] = head["quality"]
     summary["captures"] = station.captures
     if truth is not None:
-        summary["truth"] = truth_check(truth, projector=calib, rig=Rig.load(rig_dir), head=head, mount=mount)
+        summary["truth"] = truth_check(truth, projector=calib, rig=Rig.load(rig_dir), head=head, mount=mount,
+                                       cameras_95=summary.get("stereo", {}).get("cameras_95"))

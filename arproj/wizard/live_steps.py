@@ -264,10 +264,12 @@ def _check(error: float, bound: float, unit: str, share: float, **extra: float) 
 
 
 def truth_check(truth: dict, projector: ProjectorCalibration | None = None, rig: Rig | None = None,
-                head: dict | None = None, mount: MountFit | None = None) -> dict[str, dict[str, Any]]:
+                head: dict | None = None, mount: MountFit | None = None,
+                cameras_95: dict[str, dict[str, float]] | None = None) -> dict[str, dict[str, Any]]:
     """Each recovered quantity: its error against the truth, its 95 % bound and whether the error is within.
 
-    Scalars (projector fx, fy, cx, cy, px): |error| ≤ 1.96 σ. Vectors (the projector's orientation and position at
+    Scalars (projector fx, fy, cx, cy, px; with the stereo step's cameras_95 and the rig, each camera's fx, fy,
+    cx, cy, px): |error| ≤ 1.96 σ. Vectors (the projector's orientation and position at
     each check angle, the mount's rotation and offset): the error inside the 95 % ellipsoid (χ²₃); the bound given
     is the ellipsoid's largest semi-axis. The design mount's error is reported beside the calibrated one.
     """
@@ -278,6 +280,13 @@ def truth_check(truth: dict, projector: ProjectorCalibration | None = None, rig:
             err = float(getattr(projector.projector, k) - getattr(true, k))
             bound = 1.96 * projector.projector_sigma[k]
             out[f"projector {k}"] = _check(err, bound, "px", abs(err) / bound if bound > 0 else np.inf)
+    if rig is not None and cameras_95:
+        for name, bounds in cameras_95.items():
+            true = _truth_intrinsics(truth[name])
+            for k, bound in bounds.items():
+                err = float(getattr(rig.intrinsics[name], k) - getattr(true, k))
+                out[f"{name.replace('_', ' ')} {k}"] = _check(err, bound, "px",
+                                                              abs(err) / bound if bound > 0 else np.inf)
     if rig is not None and head is not None:
         true_head = HeadModel.from_dict(truth["head"])
         offset = np.asarray(truth["head_angle_offset_deg"])

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from calibration.boards import Board, BoardView, parse_board
 from calibration.head import HeadFit, fit_head, head_plan, rebase_head
 from calibration.projector import calibrate_inverse_camera
-from calibration.stereo import calibrate_stereo, coverage_advice, stereo_covariance_doc
+from calibration.stereo import StereoCalibration, calibrate_stereo, coverage_advice, stereo_covariance_doc
 from calibration.validation import (
     GridMeasurement,
     ProjectedGrid,
@@ -62,9 +62,18 @@ def step_stereo(station: Station, out: Path, board_spec: str, n_poses: int = STE
               quality={"stereo": calib.quality() | {"parameter_covariance": stereo_covariance_doc(calib)}})
     rig.save(out)
     missing = [v.source if v is not None else f"pose {k:02d}" for k, v in enumerate(left) if v is None]
-    result = {"quality": calib.quality(), "advice": coverage_advice(calib.coverage),
+    result = {"quality": calib.quality() | {"cameras_95": cameras_95(calib)}, "advice": coverage_advice(calib.coverage),
               "views_without_board": missing}
     return result, rig
+
+
+def cameras_95(calib: StereoCalibration) -> dict[str, dict[str, float]]:
+    """Each camera's fx, fy, cx, cy 95 % bound (1.96 σ of the joint refinement), px; empty without it."""
+    if calib.bundle is None or not calib.bundle.intrinsics_sigma:
+        return {}
+    return {name: {k: round(1.96 * v, 4) for k, v in sigma.items()}
+            for name, sigma in zip(("camera_left", "camera_right"), calib.bundle.intrinsics_sigma, strict=True)
+            if sigma is not None}
 
 
 def head_angles(station: Any) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:

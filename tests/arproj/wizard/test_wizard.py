@@ -23,6 +23,10 @@ def test_sim_stereo_step_meets_targets_and_state_resumes(tmp_path: Path) -> None
         assert abs(errors[cam]["fx_pct"]) < 0.2 and abs(errors[cam]["fy_pct"]) < 0.2
         assert abs(errors[cam]["cx_px"]) < 1.0 and abs(errors[cam]["cy_px"]) < 1.0
     assert abs(errors["baseline_mm"]) < 0.5
+    # each camera's 95 % bounds from the joint refinement (the live calibration's truth checks judge them)
+    bounds = stereo["quality"]["cameras_95"]
+    assert set(bounds) == {"camera_left", "camera_right"}
+    assert all(set(b) == {"fx", "fy", "cx", "cy"} and all(0 < v < 5.0 for v in b.values()) for b in bounds.values())
     rig = Rig.load(tmp_path)
     assert set(rig.intrinsics) == {"camera_left", "camera_right"}
     saved = json.loads((tmp_path / STATE_FILE).read_text())
