@@ -202,6 +202,11 @@ def _intrinsics_sigma(problem: _Problem, cov: NDArray[np.float64]) -> list[dict[
     return out
 
 
+def intrinsics_95(sigma: dict[str, float]) -> dict[str, float]:
+    """95 % bounds (1.96 σ, px, rounded as written) of one camera's fx, fy, cx, cy from its intrinsics_sigma."""
+    return {k: round(1.96 * v, 4) for k, v in sigma.items()}
+
+
 def _parameter_names(problem: _Problem, models: list[str]) -> list[str]:
     names = []
     for cam in range(len(problem.cameras)):

@@ -31,7 +31,7 @@ from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
 from calibration.boards import Board, BoardView, detect, read_gray
-from calibration.bundle import Observation, bundle_adjust
+from calibration.bundle import Observation, bundle_adjust, intrinsics_95
 from calibration.camera_model import DISTORTION_MODELS, solve_pnp
 from calibration.stereo import calibrate_camera, view_tilt_deg
 from calibration.validation import snap_points_to_plane
@@ -296,8 +296,7 @@ class ProjectorCalibration:
                                         else np.asarray(self.T_projector_from_camera).tolist()),
             "warnings": list(self.warnings),
             # 95 % bounds (1.96 σ, px) of the projector's fx, fy, cx, cy from the fit's covariance
-            "projector_95": (None if self.projector_sigma is None
-                             else {k: round(1.96 * v, 4) for k, v in self.projector_sigma.items()}),
+            "projector_95": None if self.projector_sigma is None else intrinsics_95(self.projector_sigma),
         }
 
 

@@ -263,6 +263,11 @@ def _check(error: float, bound: float, unit: str, share: float, **extra: float) 
     return {"error": error, "bound": bound, "unit": unit, "share_of_bound": share, "within": share <= 1.0} | extra
 
 
+def _scalar_check(error: float, bound: float) -> dict[str, Any]:
+    """One intrinsic in pixels against its 95 % bound (|e| / bound; no bound: never within)."""
+    return _check(error, bound, "px", abs(error) / bound if bound > 0 else np.inf)
+
+
 def truth_check(truth: dict, projector: ProjectorCalibration | None = None, rig: Rig | None = None,
                 head: dict | None = None, mount: MountFit | None = None,
                 cameras_95: dict[str, dict[str, float]] | None = None) -> dict[str, dict[str, Any]]:
@@ -277,16 +282,14 @@ def truth_check(truth: dict, projector: ProjectorCalibration | None = None, rig:
     if projector is not None and projector.projector_sigma is not None:
         true = _truth_intrinsics(truth["projector"])
         for k in ("fx", "fy", "cx", "cy"):
-            err = float(getattr(projector.projector, k) - getattr(true, k))
-            bound = 1.96 * projector.projector_sigma[k]
-            out[f"projector {k}"] = _check(err, bound, "px", abs(err) / bound if bound > 0 else np.inf)
+            out[f"projector {k}"] = _scalar_check(float(getattr(projector.projector, k) - getattr(true, k)),
+                                                  1.96 * projector.projector_sigma[k])
     if rig is not None and cameras_95:
         for name, bounds in cameras_95.items():
             true = _truth_intrinsics(truth[name])
             for k, bound in bounds.items():
-                err = float(getattr(rig.intrinsics[name], k) - getattr(true, k))
-                out[f"{name.replace('_', ' ')} {k}"] = _check(err, bound, "px",
-                                                              abs(err) / bound if bound > 0 else np.inf)
+                out[f"{name.replace('_', ' ')} {k}"] = _scalar_check(
+                    float(getattr(rig.intrinsics[name], k) - getattr(true, k)), bound)
     if rig is not None and head is not None:
         true_head = HeadModel.from_dict(truth["head"])
         offset = np.asarray(truth["head_angle_offset_deg"])

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from calibration.boards import Board, BoardView, parse_board
+from calibration.bundle import intrinsics_95
 from calibration.head import HeadFit, fit_head, head_plan, rebase_head
 from calibration.projector import calibrate_inverse_camera
 from calibration.stereo import StereoCalibration, calibrate_stereo, coverage_advice, stereo_covariance_doc
@@ -71,9 +72,8 @@ def cameras_95(calib: StereoCalibration) -> dict[str, dict[str, float]]:
     """Each camera's fx, fy, cx, cy 95 % bound (1.96 σ of the joint refinement), px; empty without it."""
     if calib.bundle is None or not calib.bundle.intrinsics_sigma:
         return {}
-    return {name: {k: round(1.96 * v, 4) for k, v in sigma.items()}
-            for name, sigma in zip(("camera_left", "camera_right"), calib.bundle.intrinsics_sigma, strict=True)
-            if sigma is not None}
+    sigmas = zip(("camera_left", "camera_right"), calib.bundle.intrinsics_sigma, strict=True)
+    return {name: intrinsics_95(sigma) for name, sigma in sigmas if sigma is not None}
 
 
 def head_angles(station: Any) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
