@@ -25,7 +25,7 @@ from devices.errors import DeviceError, DeviceResetError
 from devices.grbl import GrblDrives
 from devices.laser2d import Laser2D, ranges_from_mm
 from devices.link import MAX_LINE_BYTES, LineFramer, SerialLink
-from devices.pelco_d import PanTiltHead
+from devices.pelco_d import POSITION_TOLERANCE_DEG, PanTiltHead
 from devices.robotbase import RobotBase
 from devices.sim import DeviceServer, FaultConfig, FaultInjector, HeadSimulator
 from devices.sim.pelco_d import HEAD_STREAM
@@ -166,9 +166,14 @@ def head_client(faults: FaultConfig) -> Iterator[Client]:
                 time.sleep(0.03)
             return head.position()
 
+        def where_the_head_stopped(got: object) -> None:
+            """move_to answers once the head reports within its tolerance of the target, where it may still
+            take the last hundredth of a degree: the answer is a reading near where the head stands now."""
+            assert got == pytest.approx(sim.reported_deg(), abs=POSITION_TOLERANCE_DEG + 0.006)
+
         requests = [
             Request("pan and tilt queries", settled_position, 2, where_the_head_says, extra_s=2.03),
-            Request("move", lambda: head.move_to(*next(targets)), 0, where_the_head_says,
+            Request("move", lambda: head.move_to(*next(targets)), 0, where_the_head_stopped,
                     extra_s=head.settle_timeout_s + 0.02 + 2 * position_s),
         ]
         try:
