@@ -34,6 +34,14 @@ SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_MAX_ITER | cv2.TERM_CRITERIA_EPS, 100, 1e-4
 SUBPIX_RETRY_MIN_PX = 1.0
 SUBPIX_RETRY_FRACTION = 0.05
 SB_RNG_SEED = 0x5B  # findChessboardCornersSB's random sampling, fixed (see detect)
+# A chessboard's outer squares alternate dark and bright all round. A grid found one square off (the board
+# partly hidden, its edge against the white margin taken for a row of corners) has the margin where one side's
+# outer squares should alternate: each side must match the pattern in at least this share of its squares.
+RING_MIN_MATCH = 0.75
+RING_SAMPLE_HALF = 0.15  # each square's brightness: the mean over ±this share of a square about a point …
+RING_DEPTH = 0.3  # … this share of a square out from the grid's edge for the outer squares (a print trimmed
+# near the board's edge leaves them narrower), their centre for the inner ones
+RING_MIN_CONTRAST = 8.0  # grey levels between the inner dark and bright squares, else the check cannot tell
 
 # Squares above this are implausible for a printed board: the size was most likely typed in mm or cm.
 MAX_SQUARE_M = 0.3
@@ -276,7 +284,9 @@ def detect(board: Board, image: NDArray, source: str = "") -> BoardView | None:
             if not found:
                 return None
         pts = refine_corners(gray, corners, board.pattern_size)
-        pts = _canonical_order(pts, board.pattern_size)
+        if not outer_squares_alternate(gray, pts, board.pattern_size):
+            return None  # corners numbered a square off: worse than no view (a stereo pair would disagree)
+        pts = canonical_order(pts, board.pattern_size)
         return BoardView(pts, board.object_points(), np.arange(board.n_corners), size, source, gray)
     detector = cv2.aruco.CharucoDetector(board.charuco_board())
     corners, ids, _, _ = detector.detectBoard(gray)
@@ -290,7 +300,55 @@ def detect(board: Board, image: NDArray, source: str = "") -> BoardView | None:
     return BoardView(pts, obj, corner_ids, size, source, gray)
 
 
-def _canonical_order(pts: NDArray[np.float64], pattern_size: tuple[int, int]) -> NDArray[np.float64]:
+def outer_squares_alternate(gray: NDArray[np.uint8], pts: NDArray[np.float64], pattern_size: tuple[int, int]
+                            ) -> bool:
+    """Whether the squares just outside a chessboard's corner grid (n, 2), row by row, alternate as a board's
+    outer squares do: dark and bright by parity, as the inner squares are. Each side in view is judged alone;
+    True when the inner squares have too little contrast to judge."""
+    c, r = pattern_size
+    grid = np.stack(np.meshgrid(np.arange(c), np.arange(r)), axis=-1).reshape(-1, 2).astype(np.float64)
+    H, _ = cv2.findHomography(grid, np.asarray(pts, dtype=np.float64).reshape(-1, 2))
+    if H is None:
+        return False
+    # Square (i, j) spans grid i..i+1, j..j+1: inner squares i in 0..c-2, the outer ring -1 and c-1.
+    offsets = np.linspace(-RING_SAMPLE_HALF, RING_SAMPLE_HALF, 3)
+    patch = np.stack(np.meshgrid(offsets, offsets), axis=-1).reshape(-1, 2)
+
+    def brightness(i: NDArray[np.float64], j: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Mean grey of squares (i, j) (nan where a sample falls outside the image): inner squares about their
+        centre, outer ones RING_DEPTH out from the grid's edge."""
+        x = np.where(i < 0, -RING_DEPTH, np.where(i > c - 2, c - 1 + RING_DEPTH, i + 0.5))
+        y = np.where(j < 0, -RING_DEPTH, np.where(j > r - 2, r - 1 + RING_DEPTH, j + 0.5))
+        centres = np.stack([x, y], axis=-1)[:, None, :] + patch[None]
+        img = cv2.perspectiveTransform(centres.reshape(-1, 1, 2), H).reshape(len(i), -1, 2)
+        h, w = gray.shape[:2]
+        inside = np.all((img >= 0) & (img <= [w - 1, h - 1]), axis=(1, 2))
+        xy = np.clip(np.rint(img).astype(np.int64), 0, [w - 1, h - 1])
+        mean = gray[xy[..., 1], xy[..., 0]].mean(axis=1)
+        return np.where(inside, mean, np.nan)
+
+    ii, jj = (a.ravel().astype(np.float64) for a in np.meshgrid(np.arange(c - 1), np.arange(r - 1)))
+    inner = brightness(ii, jj)
+    parity = (ii + jj) % 2
+    levels = [float(np.nanmean(inner[parity == k])) for k in (0, 1)]
+    if not all(np.isfinite(levels)) or abs(levels[0] - levels[1]) < RING_MIN_CONTRAST:
+        return True
+    threshold, dark_parity = sum(levels) / 2, int(np.argmin(levels))
+    along_x, along_y = np.arange(-1, c, dtype=np.float64), np.arange(-1, r, dtype=np.float64)
+    sides = [(along_x, np.full_like(along_x, -1.0)), (along_x, np.full_like(along_x, r - 1.0)),
+             (np.full_like(along_y, -1.0), along_y), (np.full_like(along_y, c - 1.0), along_y)]
+    for i, j in sides:
+        value = brightness(i, j)
+        seen = np.isfinite(value)
+        if not seen.any():
+            continue
+        dark_expected = (i + j) % 2 == dark_parity
+        if np.mean((value[seen] < threshold) == dark_expected[seen]) < RING_MIN_MATCH:
+            return False
+    return True
+
+
+def canonical_order(pts: NDArray[np.float64], pattern_size: tuple[int, int]) -> NDArray[np.float64]:
     """A chessboard with uneven sides is still 180° ambiguous: start at the corner nearer the image's top-left.
 
     Two cameras of a stereo rig looking at the same board then number its corners alike (checked again,

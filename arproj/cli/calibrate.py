@@ -31,6 +31,8 @@ ACCEPT_POOR_HELP = ("Write the result even when its residuals are far outside wh
                     "(by default it is refused and the earlier result kept).")
 STEREO_FILES = ("camera_left.yaml", "camera_right.yaml", "rig.yaml", "stereo_coverage.png")  # a stereo rig folder
 CAMERA_FILES = ("camera.yaml", "camera_quality.json")
+BOARD_CHECK_HINT = ("check --board: COLSxROWS counts inner corners (a board of 10x7 squares is 9x6) and the square "
+                    "size is in metres")
 
 
 def _refuse_poor(problems: list[str], out: Path, accept_poor: bool) -> None:
@@ -42,8 +44,7 @@ def _refuse_poor(problems: list[str], out: Path, accept_poor: bool) -> None:
                           highlight=False)
         return
     raise InputError(f"calibration refused: {'; '.join(problems)}; {out} is left as it was",
-                     "check --board: COLSxROWS counts inner corners (a board of 10x7 squares is 9x6) and the square "
-                     "size is in metres; --accept-poor writes it anyway")
+                     f"{BOARD_CHECK_HINT}; --accept-poor writes it anyway")
 
 
 def _parse_size(text: str, option: str) -> tuple[int, int]:
@@ -76,9 +77,7 @@ def stereo_command(left: str, right: str, board_spec: str, out: Path, model: str
         try:
             calib = calibrate_stereo(images.left, images.right, board, model=model)
         except InputError as err:
-            if images.no_board:
-                raise InputError(f"{err.message} (no board in: {', '.join(images.no_board)})", err.hint) from None
-            raise
+            raise _too_few_boards(err, images.no_board) from None
         _refuse_poor(stereo_quality_problems(calib), out, accept_poor)
         rig = Rig(intrinsics={"camera_left": calib.left, "camera_right": calib.right},
                   poses={"T_camera_right_from_camera_left": calib.T_right_from_left},
@@ -130,6 +129,16 @@ def _warn_no_board(names: list[str], board: Board) -> None:
                           highlight=False)
 
 
+def _too_few_boards(err: InputError, no_board: list[str]) -> InputError:
+    """The calibration's refusal for too few views, naming the images without a board and pointing at the board
+    option (a spec of another size finds no board at all in them)."""
+    if not no_board:
+        return err
+    hint = f"{err.hint}; " if err.hint else ""
+    return InputError(f"{err.message} (no board in: {', '.join(no_board)})",
+                      f"{hint}if the board is in view in those images, {BOARD_CHECK_HINT}")
+
+
 def camera_command(images: str, board_spec: str, out: Path, model: str, as_json: bool,
                    accept_poor: bool = False) -> dict:
     """Calibrate one camera from image files: writes OUT/camera.yaml and OUT/camera_quality.json whole (refused,
@@ -148,9 +157,7 @@ def camera_command(images: str, board_spec: str, out: Path, model: str, as_json:
     try:
         calib = calibrate_camera([v for v in found.views if v is not None], model=model)
     except InputError as err:
-        if found.no_board:
-            raise InputError(f"{err.message} (no board in: {', '.join(found.no_board)})", err.hint) from None
-        raise
+        raise _too_few_boards(err, found.no_board) from None
     _refuse_poor(camera_quality_problems(calib), out, accept_poor)
     figures = calib.quality() | {"board": board_spec, "images_without_board": found.no_board}
     with folder as tmp:
