@@ -58,6 +58,7 @@ uniform int u_n_levels;
 uniform float u_defocus_px_m;        // aperture · focal length in pixels (blur circle = this · |1/s − 1/z|)
 uniform float u_inverse_focus;       // 1 / focus distance (1/m)
 uniform float u_lens_blur_px;
+uniform float u_footprint_scale;     // camera pixels per rendered pixel (a supersampled view: 2)
 
 uniform int u_shadows_on;
 uniform sampler2D u_shadow_depth;    // projector-axis depth of the nearest surface, pinhole view
@@ -142,7 +143,7 @@ void main() {
 
 #ifdef DEFERRED
     // A camera pixel integrates the projector image over its footprint: a box of that width has σ ≈ w/√12.
-    vec2 footprint = max(abs(dFdx(pixel)), abs(dFdy(pixel)));
+    vec2 footprint = u_footprint_scale * max(abs(dFdx(pixel)), abs(dFdy(pixel)));
     float sigma_pixel = 0.2887 * max(footprint.x, footprint.y);
     float sigma_total = sqrt(sigma * sigma + sigma_pixel * sigma_pixel);
     f_albedo = vec4(albedo, depth);

@@ -246,13 +246,16 @@ class SceneRenderer:
         return out
 
     def render_deferred(self, intr: Intrinsics, T_room_from_camera: NDArray[np.float64],
-                        projector: ProjectorState, samples: int = 0) -> tuple[NDArray[np.float32], ...]:
+                        projector: ProjectorState, samples: int = 0, footprint_scale: float = 1.0
+                        ) -> tuple[NDArray[np.float32], ...]:
         """What any projector image needs to light this view, each (h, w, 4) float32 for pinhole intr:
         (albedo rgb, depth along the axis in metres, 0 where nothing) and (projector irradiance per unit
         linear light in lux, projector pixel u, v, blur σ in projector pixels incl. the camera pixel's
-        footprint). samples: multisampling (0: none)."""
+        footprint). samples: multisampling (0: none); footprint_scale: camera pixels per rendered pixel (a view
+        rendered finer than the sensor, then averaged onto it)."""
         with self.ctx:
             _collect_garbage(self.ctx)
+            _set(self.deferred_program, "u_footprint_scale", float(footprint_scale))
             return self._draw(self.deferred_program, self._deferred_vaos, 2, intr, T_room_from_camera, 0.0,
                               projector, samples)
 

@@ -33,6 +33,7 @@ UNIFORM_DISC_SIGMA = 0.25         # Gaussian σ of a uniform disc, per unit diam
 AUTO_EXPOSURE_PERCENTILE = 99.5   # auto exposure meters on this percentile of the scene's radiance …
 AUTO_EXPOSURE_LEVEL = 0.75        # … and puts it at this fraction of full well
 AUTO_EXPOSURE_MAX_GAIN = 4.0      # never longer than this many times the configured exposure
+DISTORTION_SUPERSAMPLE = 2        # a distorting camera's view: rendered this much finer per side (see to_sensor)
 
 
 def defocus_sigma_px(aperture_mm: float, f_px: float, focus_m: float, depth_m: NDArray | float,
@@ -164,22 +165,39 @@ class CameraModel:
                    bool(c["vignetting"]), prnu, gain)
 
     @property
+    def render_scale(self) -> int:
+        """Rendered pixels per sensor pixel (per side): DISTORTION_SUPERSAMPLE when the lens distorts, else 1."""
+        return DISTORTION_SUPERSAMPLE if self.intr.has_distortion else 1
+
+    @property
     def render_intrinsics(self) -> Intrinsics:
-        """The pinhole the renderer draws: enlarged to hold every ray when the lens distorts."""
+        """The pinhole the renderer draws: enlarged to hold every ray when the lens distorts (and finer, see
+        to_sensor)."""
         return self.dmap.pinhole if self.intr.has_distortion else self.intr
 
     @property
     def dmap(self) -> DistortionMap:
-        return distortion_map(self.intr)
+        """The distortion map onto the sensor sampled render_scale times finer."""
+        return distortion_map(self.intr.scaled(self.render_scale))
+
+    def to_sensor(self, rendered: NDArray[np.float32]) -> NDArray[np.float32]:
+        """A render of render_intrinsics (h', w'[, c]) on the sensor grid: through the lens distortion, each sensor
+        pixel the mean over its area (render_scale² samples). One sample at each pixel's centre, bilinear in
+        the pinhole render, left every board corner a few hundredths of a pixel off in a pattern that follows
+        the distortion; a stereo calibration's principal points came out +0.3 to +0.5 px on average (16 board
+        views, 12 seeds), gone with the area mean (+0.03 px)."""
+        if not self.intr.has_distortion:
+            return rendered
+        m = self.dmap.map_xy
+        fine = cv2.remap(rendered, m[..., 0], m[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+        if self.render_scale == 1:
+            return fine
+        return cv2.resize(fine, (self.intr.width, self.intr.height), interpolation=cv2.INTER_AREA)
 
     def develop(self, rendered: NDArray[np.float32], exposure_s: float | None, rng: np.random.Generator | None
                 ) -> NDArray[np.uint8]:
         """The 8-bit photo from the renderer's pinhole (H', W', 4) radiance + depth; rng None: no noise."""
-        if self.intr.has_distortion:
-            m = self.dmap.map_xy
-            img = cv2.remap(rendered, m[..., 0], m[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-        else:
-            img = rendered
+        img = self.to_sensor(rendered)
         signal = img[..., :3] if self.color else img[..., :3] @ LUMA_RGB
         return self.expose(np.ascontiguousarray(signal), img[..., 3], exposure_s, rng)
 

@@ -564,14 +564,8 @@ class Site:
         renderer = self.renderer
         renderer.set_surfaces(surfaces)
         albedo, projector = renderer.render_deferred(model.render_intrinsics, T, self._projector_state(None),
-                                                     self.scene["cameras"]["msaa_samples"])
-        if model.intr.has_distortion:
-            m = model.dmap.map_xy
-
-            def warp(a: NDArray[np.float32]) -> NDArray[np.float32]:
-                return cv2.remap(a, m[..., 0], m[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-
-            albedo, projector = warp(albedo), warp(projector)
+                                                     self.scene["cameras"]["msaa_samples"], model.render_scale)
+        albedo, projector = model.to_sensor(albedo), model.to_sensor(projector)
         irradiance, map_u, map_v, sigma = cv2.split(projector)
         depth = cv2.extractChannel(albedo, 3)
         seen = irradiance > 0

@@ -17,6 +17,7 @@ DOT_ERROR_PX = 0.08          # projected dot centroid vs analytic projection, no
 DOT_ERROR_NOISY_PX = 0.25    # the same with sensor noise
 WALL_XY_M = 1e-6             # wall coordinates from the photo's truth vs an independent ray-plane intersection
 RENDER_DEPTH_M = 2e-4        # renderer depth (bilinear between pixel centres) vs ray-cast depth
+RENDER_DEPTH_CREASE_M = 2e-3  # the same within a pixel of a crease between surfaces (a pixel's area mean)
 CHESSBOARD_PX = 0.1          # detected board corners vs analytic projection
 
 
@@ -80,12 +81,17 @@ def test_wall_coordinates_of_pixels_agree_with_ray_casting(site: Site) -> None:
     assert np.max(np.abs(truth_xy[on_wall] - xy[on_wall])) < WALL_XY_M * 1e3  # float32 storage: ~µm
     # The renderer's depth (what the image is made of) agrees with the ray-cast truth.
     rendered = site.render_radiance("camera_left")
-    dmap = site.camera_models["camera_left"].dmap
-    depth = cv2.remap(rendered[..., 3], dmap.map_xy[..., 0], dmap.map_xy[..., 1], cv2.INTER_LINEAR)
+    depth = site.camera_models["camera_left"].to_sensor(rendered)[..., 3]
     truth = photo.truth.depth
     inner = (slice(5, -5), slice(5, -5))
     assert np.isfinite(truth[inner]).all()
-    assert np.nanmax(np.abs(depth[inner] - truth[inner])) < RENDER_DEPTH_M
+    error = np.abs(depth - truth)[inner]
+    # Each sensor pixel is the mean over its area: on one plane that is its centre's depth; across the crease
+    # between two walls (or wall and floor) it is not, by up to a pixel's footprint (~3 mm at 2.5 m) / 4.
+    index = photo.wall_index.astype(np.float32)
+    one_surface = (cv2.erode(index, np.ones((3, 3))) == cv2.dilate(index, np.ones((3, 3))))[inner]
+    assert np.nanmax(error[one_surface]) < RENDER_DEPTH_M
+    assert np.nanmax(error) < RENDER_DEPTH_CREASE_M
 
 
 @pytest.mark.gl
