@@ -9,8 +9,8 @@
    brightness fall-off across an oblique wall can no longer pull it aside; the refined point is mapped back
    to camera pixels through the same warp, so small errors of H cancel.
 4. A corner is kept only if it stayed near its prediction and its four squares show the expected black/white
-   parity with enough contrast; H is refitted to the kept corners and steps 3–4 repeat. Parts off the wall,
-   occluded or on another surface fail the checks and are left out.
+   parity with enough contrast; H is refitted to the kept corners of one surface (RANSAC within half a pixel)
+   and steps 3–4 repeat. Parts off the wall, occluded or on another surface fail the checks and are left out.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from wallpose import limits
 from wallpose.pattern import MARKER_DICTIONARY, CheckerPattern
 
 RECTIFY_PASSES = 2
+SURFACE_RANSAC_PX = 0.5     # refined corners farther than this from the refitted homography: another surface
 MIN_RECT_SQUARE_PX = 14.0   # a square spans at least this many pixels in the rectified image
 MAP_STEP_PX = 8             # the rectifying map is computed on this grid and interpolated
 FLAT_FIELD_STEP = 3         # the black/white envelopes are computed on this grid (odd) and interpolated
@@ -311,7 +312,12 @@ def _detect(image: NDArray, pattern: CheckerPattern, camera: Intrinsics, project
         if accepted.sum() < 4:
             break
         cam_norm = camera.rays(refined[accepted])[:, :2]
-        H_new, _ = cv2.findHomography(proj_norm[accepted], cam_norm, cv2.RANSAC, 1.5 / f)
+        # refitted to the corners of one surface: their refined positions fit its homography to their noise
+        # (~0.1 px). With a looser gate a board or a person some centimetres before the wall, holding part of
+        # the pattern, drew a homography that splits the difference between the two surfaces (each off it by
+        # a pixel or so at 2 m): it kept half of each and lost the rest of the wall's corners in that camera,
+        # and a plane fitted to the few stereo corners left tilted beyond its own 95 % bound (bench scene 10212)
+        H_new, _ = cv2.findHomography(proj_norm[accepted], cam_norm, cv2.RANSAC, SURFACE_RANSAC_PX / f)
         if H_new is None:
             break
         converged = np.array_equal(accepted, previous)
