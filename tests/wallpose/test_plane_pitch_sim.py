@@ -1,12 +1,12 @@
-"""The wall plane's pitch at 4 m on the simulated site with the perfect rig (issue 20's half-pixel target). In a
-room tall enough that the whole pattern lands on the wall: aimed at 1.2 m (the head almost level) the fitted
-normal is right to 0.01° (seeds 1-3; seed 0: -0.033°); aimed at the scene's 1.4 m (the head tilted up
-1.7-2.3°) it tilted about the wall's horizontal axis by up to 0.055° (seeds 0-3: -0.035, -0.014, -0.055,
--0.005°), a 0.01-0.02 px trend of the corners' disparity over the image rows that the 0.2 m stereo baseline turns into the tilt; with neither lens
-distorting it was right to 0.005°. The trend came from the simulated cameras, which took one bilinear sample of
-the pinhole render at each pixel's centre through the lens's warp; averaged over each pixel's area
-(arproj.sim.optics.CameraModel.to_sensor) the same seeds give -0.023, -0.018, -0.026, +0.004°: within the
-0.03° below, though a smaller common tilt of about -0.02° is left (not located)."""
+"""The wall plane's pitch at 4 m on the simulated site with the perfect rig (issue 20's half-pixel target). In a room
+tall enough that the whole pattern lands on the wall: aimed at 1.2 m (the head almost level) the fitted normal is
+right to 0.01° (seeds 1-3; seed 0: -0.033°); aimed at the scene's 1.4 m (the head tilted up 1.7-2.3°) it tilted
+about the wall's horizontal axis by up to 0.055° (seeds 0-3: -0.035, -0.014, -0.055, -0.005°), a 0.01-0.02 px trend
+of the corners' disparity over the image rows that the 0.2 m stereo baseline turns into the tilt; with neither lens
+distorting it was right to 0.005°. The trend came from the simulated cameras, which took one bilinear sample of the
+pinhole render at each pixel's centre through the lens's warp; averaged over each pixel's area
+(arproj.sim.optics.CameraModel.to_sensor) the same seeds give -0.023, -0.018, -0.026, +0.004°: within the 0.03°
+below, though a smaller common tilt of about -0.02° is left (not located)."""
 
 import numpy as np
 import pytest
