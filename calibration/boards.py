@@ -226,8 +226,8 @@ def grid_predictions(pts: NDArray[np.float64], pattern_size: tuple[int, int]) ->
     """
     c, r = pattern_size
     flat = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
-    jj, ii = np.divmod(np.arange(r * c), c)
-    grid = np.column_stack([ii, jj]).astype(np.float64)
+    grid = _grid_positions(pattern_size)
+    ii, jj = grid[:, 0], grid[:, 1]
     out = flat.copy()
     for k in range(r * c):
         for steps in (1, 2):
@@ -241,6 +241,13 @@ def grid_predictions(pts: NDArray[np.float64], pattern_size: tuple[int, int]) ->
         p = H @ [grid[k, 0], grid[k, 1], 1.0]
         out[k] = p[:2] / p[2]
     return out
+
+
+def _grid_positions(pattern_size: tuple[int, int]) -> NDArray[np.float64]:
+    """(n, 2) grid coordinates (column, row) of a chessboard's corners, row by row as the detectors give them."""
+    c, r = pattern_size
+    rows, cols = np.divmod(np.arange(r * c), c)
+    return np.column_stack([cols, rows]).astype(np.float64)
 
 
 def _half_windows(spacing: NDArray[np.float64], fraction: float) -> NDArray[np.int64]:
@@ -306,8 +313,7 @@ def outer_squares_alternate(gray: NDArray[np.uint8], pts: NDArray[np.float64], p
     outer squares do: dark and bright by parity, as the inner squares are. Each side in view is judged alone;
     True when the inner squares have too little contrast to judge."""
     c, r = pattern_size
-    grid = np.stack(np.meshgrid(np.arange(c), np.arange(r)), axis=-1).reshape(-1, 2).astype(np.float64)
-    H, _ = cv2.findHomography(grid, np.asarray(pts, dtype=np.float64).reshape(-1, 2))
+    H, _ = cv2.findHomography(_grid_positions(pattern_size), np.asarray(pts, dtype=np.float64).reshape(-1, 2))
     if H is None:
         return False
     # Square (i, j) spans grid i..i+1, j..j+1: inner squares i in 0..c-2, the outer ring -1 and c-1.
