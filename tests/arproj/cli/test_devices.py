@@ -17,6 +17,7 @@ import pytest
 
 from arproj.run.devices import read_urls
 from scanner.log import ScanLog
+from tests.support.processes import ctrl_c_default
 
 WALL, SEED = "small_test_wall", 5
 ENV = {**os.environ, "COLUMNS": "150"}
@@ -31,7 +32,7 @@ def _served(tmp_path: Path, faults: float) -> Iterator[dict[str, str]]:
     urls_file = tmp_path / f"urls-{faults:g}.yaml"
     proc = subprocess.Popen(_cli("devices", "serve", "--wall", WALL, "--seed", str(SEED), "--faults", str(faults),
                                  "--urls", str(urls_file)), env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, preexec_fn=ctrl_c_default)
     try:
         deadline = time.monotonic() + 60
         while not urls_file.exists() and proc.poll() is None and time.monotonic() < deadline:

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from scanner.log import ScanLog
+from tests.support.processes import ctrl_c_default
 
 ROOT = Path(__file__).resolve().parents[3]
 EXE = Path(sys.executable).parent / "arproj"
@@ -83,7 +84,7 @@ def test_ctrl_c_while_starting_and_while_scanning_is_one_line_and_130(tmp_path: 
     }
     for moment, reached in moments.items():
         proc = subprocess.Popen([str(EXE), *SCAN, "--log", str(log)], stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True, cwd=ROOT)
+                                stderr=subprocess.PIPE, text=True, cwd=ROOT, preexec_fn=ctrl_c_default)
         _wait_for(lambda proc=proc, reached=reached: reached(proc), proc)
         proc.send_signal(signal.SIGINT)
         _, stderr = proc.communicate(timeout=120)

@@ -28,6 +28,7 @@ from arproj.session.wallmap import wall_map_from_wall_file
 from arproj.site_file import read_site, read_site_wall, simulated_room, site_wall_from_scan
 from geometry.poses import invert, rotation_angle_deg
 from scanner.laser import LaserConfig
+from tests.support.processes import ctrl_c_default
 
 WALL, KEY, SEED = "paper_test_plate", "plate", 4
 DISTANCE_M = 2.0
@@ -125,7 +126,7 @@ def test_reopened_site_registers_as_in_one_process(scanned: tuple[Path, object])
 def _serve(urls_file: Path, *args: str) -> tuple[subprocess.Popen[str], dict[str, str]]:
     """`arproj devices serve` in a process of its own, and its URLs once it has written them."""
     serve = subprocess.Popen(_cli("devices", "serve", "--urls", str(urls_file), *args), env=ENV,
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=ctrl_c_default)
     deadline = time.monotonic() + 60
     while not urls_file.exists() and serve.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
