@@ -3,6 +3,10 @@ distance); the robot's localization, the floor it stands on and the 2-D laser sc
 side walls and room corner fix the position along the wall) fix the rest; where the wall's own edges (room
 corners, floor and ceiling lines) are in the cameras' view, their image lines do too (wallpose.edges).
 
+The robot's roll and pitch come from a prior (limits.FLOOR_TILT_SIGMA_DEG: "it stands on a floor about this
+level") unless an inclinometer on the robot measured them (TiltMeasurement): then its reading replaces the
+prior, and the estimate is as sure of the tilts as the inclinometer is.
+
 All are Gaussian measurements of one unknown, the robot's pose in the room, T_room_from_robot = T0 · exp(δ)
 with δ = (rotation vector, translation) in the robot frame around the localized pose T0; a few Gauss–Newton
 steps give δ and its covariance. T_wall_from_robot = inv(T_room_from_wall) · T_room_from_robot, so the same δ
@@ -20,7 +24,15 @@ from numpy.typing import NDArray
 
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
-from geometry.poses import invert, make_pose, pose_from_vector, transform_points
+from geometry.poses import (
+    invert,
+    make_pose,
+    pose_from_vector,
+    roll_pitch,
+    rotation_about,
+    tilt_rotation,
+    transform_points,
+)
 from wallpose import limits
 from wallpose.edges import CameraImage, EdgeObservation, Projector, find_wall_edges, project_undistorted
 from wallpose.estimate import PlaneEstimate
@@ -54,6 +66,22 @@ class WallPose:
     sources: list[str] = field(default_factory=list)
     edges: list[EdgeObservation] = field(default_factory=list)
     edges_rejected: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class TiltMeasurement:
+    """The robot's roll (about its x, forward) and pitch (about its y, left) against gravity with their 1-σ,
+    degrees, as an inclinometer on its body reads them (geometry.poses.roll_pitch names the angles)."""
+
+    roll_deg: float
+    pitch_deg: float
+    sigma_roll_deg: float
+    sigma_pitch_deg: float
+
+    def __post_init__(self) -> None:
+        values = (self.roll_deg, self.pitch_deg, self.sigma_roll_deg, self.sigma_pitch_deg)
+        if not all(np.isfinite(values)) or not (self.sigma_roll_deg > 0 and self.sigma_pitch_deg > 0):
+            raise InputError(f"a tilt measurement needs finite angles and positive σ, got {values}")
 
 
 @dataclass
@@ -102,7 +130,7 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
                        localization_sigma_m: float = 0.03, localization_sigma_deg: float = 1.0,
                        projector_covariance: NDArray | None = None, *,
                        camera_images: Sequence[CameraImage] | None = None,
-                       projector: Intrinsics | None = None) -> WallPose:
+                       projector: Intrinsics | None = None, tilt: TiltMeasurement | None = None) -> WallPose:
     """Fuse the measured plane of wall `wall` with localization, floor and (optionally) a laser scan.
 
     laser_points_robot: (n, 3) scan returns in the robot frame; T_robot_from_projector: the projector's pose
@@ -111,16 +139,25 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
     camera_images: the photos (wallpose.edges.camera_images) in which to look for the wall's edges
     (room corners, floor and ceiling lines) around where the other measurements put them; each edge found and
     consistent with them adds its image line as a measurement; projector: its intrinsics, when it was on for the
-    photos (the stretches of an edge it lights are not searched).
+    photos (the stretches of an edge it lights are not searched); tilt: the robot's roll and pitch measured by an
+    inclinometer, which replace the floor's tilt prior (the start pose takes its tilt from it too: a floor
+    localization is level).
     Raises NotEnoughEvidenceError when the plane contradicts the map (the pattern is on another wall).
     """
     if not 0 <= wall < len(room.T_room_from_walls):
         raise InputError(f"wall index {wall} is not in the room map (walls 0..{len(room.T_room_from_walls) - 1})")
     T0 = np.asarray(localized_T_room_from_robot, dtype=np.float64)
+    tilt_rad = None if tilt is None else np.radians([tilt.roll_deg, tilt.pitch_deg])
+    if tilt_rad is not None:
+        # the start pose's heading and position, standing as the inclinometer says
+        T0 = make_pose(rotation_about([0.0, 0.0, 1.0], float(np.arctan2(T0[1, 0], T0[0, 0])))
+                       @ tilt_rotation(*tilt_rad), T0[:3, 3])
+        tilt_sigma = np.radians([tilt.sigma_roll_deg, tilt.sigma_pitch_deg])
     T_wall_from_room = invert(room.T_room_from_walls[wall])
     basis, whiten = _plane_whitener(plane)
     measured = np.append(plane.normal, plane.distance)
-    sources = ["localization", "floor", "wall plane (cameras + projector)"]
+    sources = ["localization", "floor"] + ([] if tilt is None else ["inclinometer"]) + \
+        ["wall plane (cameras + projector)"]
     walls_room = [(Tw[:3, 2], Tw[:3, 3], size) for Tw, size in zip(room.T_room_from_walls, room.sizes_m, strict=True)]
     laser = None if laser_points_robot is None or len(laser_points_robot) == 0 \
         else np.asarray(laser_points_robot, dtype=np.float64)
@@ -132,8 +169,11 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
     def residuals(delta: NDArray[np.float64], gate: float) -> NDArray[np.float64]:
         T = T0 @ pose_from_vector(delta)
         out = [delta[[3, 4]] / localization_sigma_m, delta[[2]] / np.radians(localization_sigma_deg),
-               [T[2, 3] / limits.FLOOR_HEIGHT_SIGMA_M],
-               T[:2, 2] / np.radians(limits.FLOOR_TILT_SIGMA_DEG)]
+               [T[2, 3] / limits.FLOOR_HEIGHT_SIGMA_M]]
+        if tilt_rad is None:  # the floor prior: the robot's up axis near the room's
+            out.append(T[:2, 2] / np.radians(limits.FLOOR_TILT_SIGMA_DEG))
+        else:
+            out.append((np.array(roll_pitch(T)) - tilt_rad) / tilt_sigma)
         T_robot_from_wall = invert(T_wall_from_room @ T)
         n = T_robot_from_wall[:3, 2]
         predicted = np.append(n, -n @ T_robot_from_wall[:3, 3])
@@ -167,7 +207,8 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
         return delta, J
 
     _check_innovation(whiten, basis, measured, T0, T_wall_from_room, wall, localization_sigma_m,
-                      localization_sigma_deg)
+                      localization_sigma_deg, limits.FLOOR_TILT_SIGMA_DEG if tilt is None else
+                      max(tilt.sigma_roll_deg, tilt.sigma_pitch_deg))
     gates = LASER_GATES_M if laser is not None else (np.inf,)
     delta, J = solve(np.zeros(6), gates)
     covariance = np.linalg.inv(J.T @ J)
@@ -259,15 +300,17 @@ def _predicted_plane(T_room_from_robot: NDArray, T_wall_from_room: NDArray) -> N
 
 
 def _check_innovation(whiten: NDArray, basis: NDArray, measured: NDArray, T0: NDArray,
-                      T_wall_from_room: NDArray, wall: int, sigma_m: float, sigma_deg: float) -> None:
-    """Before fusing: is the measured plane where the map and the localization expect that wall to be?"""
+                      T_wall_from_room: NDArray, wall: int, sigma_m: float, sigma_deg: float,
+                      tilt_sigma_deg: float = limits.FLOOR_TILT_SIGMA_DEG) -> None:
+    """Before fusing: is the measured plane where the map and the localization expect that wall to be? (T0's
+    tilt known to tilt_sigma_deg: the floor prior's, or the inclinometer's.)"""
     z0 = basis @ (_predicted_plane(T0, T_wall_from_room) - measured)
     G = np.empty((3, 6))
     for k in range(6):
         h = np.zeros(6)
         h[k] = 1e-7
         G[:, k] = (basis @ (_predicted_plane(T0 @ pose_from_vector(h), T_wall_from_room) - measured) - z0) / 1e-7
-    tilt = np.radians(limits.FLOOR_TILT_SIGMA_DEG)
+    tilt = np.radians(tilt_sigma_deg)
     prior = np.diag([tilt, tilt, np.radians(sigma_deg), sigma_m, sigma_m, limits.FLOOR_HEIGHT_SIGMA_M]) ** 2
     cov_z = np.linalg.inv(whiten.T @ whiten)
     S = cov_z + G @ prior @ G.T
