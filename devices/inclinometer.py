@@ -16,7 +16,8 @@ mounted otherwise is levelled to the robot's axes in its firmware: the host take
                                           body really has (a real inclinometer answers ERR 1)
     errors                                #<id> ERR <code> <text>*CRC   1 unknown command, 2 bad checksum,
                                                                       4 bad argument
-Numbers are sent as Python's round-trip float repr. Every command is a pure read and may be resent.
+Numbers are sent as Python's round-trip float repr. Every command is a pure read and may be resent; the
+device holds no state, so a reconnect loses nothing and the host just asks again.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import math
 from dataclasses import dataclass
 
 from devices.crclines import CrcLineFramer, Damaged, TaggedClient
-from devices.errors import DeviceRefusedError
+from devices.errors import DeviceError, DeviceRefusedError, DeviceResetError
 from devices.link import SerialLink
 
 __all__ = ["MAX_TILT_DEG", "CrcLineFramer", "Inclinometer", "InclinometerError", "TiltReading"]
@@ -56,13 +57,28 @@ class Inclinometer(TaggedClient):
     def __init__(self, link: SerialLink[str | Damaged, str], retries: int = 8) -> None:
         super().__init__(link, retries)
 
+    def read(self, command: str, count: int) -> list[str]:
+        """The fields after OK (at least `count`) of a one-line answer, asked again after a reconnect (a
+        stateless device lost nothing); InclinometerError for any other answer."""
+        for _ in range(self.retries + 1):
+            try:
+                fields = self.request(command)[0]
+            except DeviceResetError:
+                continue
+            if fields[0] != "OK" or len(fields) < count + 1:
+                raise InclinometerError(f"inclinometer ({self.link.url}): unexpected answer {' '.join(fields)!r} "
+                                        f"to {command!r}")
+            return fields[1:]
+        raise DeviceError(f"inclinometer ({self.link.url}) reconnected {self.retries + 1} times in one reading",
+                          "check the inclinometer's cable and power")
+
     def identify(self) -> str:
-        return " ".join(self.request("ID?")[0][1:])
+        return " ".join(self.read("ID?", 1))
 
     def tilt(self) -> TiltReading:
         """A fresh reading; InclinometerError for numbers it cannot have (not finite, beyond MAX_TILT_DEG, a σ
         that is not positive)."""
-        fields = self.ok_fields("TILT?", 4)
+        fields = self.read("TILT?", 4)[:4]
         try:
             roll, pitch, s_roll, s_pitch = (float(v) for v in fields)
         except ValueError:
@@ -79,7 +95,7 @@ class Inclinometer(TaggedClient):
         """The body's true (roll, pitch) in degrees from a simulator; None for a real inclinometer (it does
         not know TRUE?)."""
         try:
-            roll, pitch = (float(v) for v in self.ok_fields("TRUE?", 2))
+            roll, pitch = (float(v) for v in self.read("TRUE?", 2)[:2])
         except InclinometerError:
             return None
         return roll, pitch

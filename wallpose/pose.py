@@ -147,12 +147,14 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
     if not 0 <= wall < len(room.T_room_from_walls):
         raise InputError(f"wall index {wall} is not in the room map (walls 0..{len(room.T_room_from_walls) - 1})")
     T0 = np.asarray(localized_T_room_from_robot, dtype=np.float64)
-    tilt_rad = None if tilt is None else np.radians([tilt.roll_deg, tilt.pitch_deg])
-    if tilt_rad is not None:
+    tilt_rad: NDArray[np.float64] | None = None
+    tilt_sigma = np.radians([limits.FLOOR_TILT_SIGMA_DEG] * 2)
+    if tilt is not None:
+        tilt_rad = np.radians([tilt.roll_deg, tilt.pitch_deg])
+        tilt_sigma = np.radians([tilt.sigma_roll_deg, tilt.sigma_pitch_deg])
         # the start pose's heading and position, standing as the inclinometer says
         T0 = make_pose(rotation_about([0.0, 0.0, 1.0], float(np.arctan2(T0[1, 0], T0[0, 0])))
                        @ tilt_rotation(*tilt_rad), T0[:3, 3])
-        tilt_sigma = np.radians([tilt.sigma_roll_deg, tilt.sigma_pitch_deg])
     T_wall_from_room = invert(room.T_room_from_walls[wall])
     basis, whiten = _plane_whitener(plane)
     measured = np.append(plane.normal, plane.distance)
@@ -171,7 +173,7 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
         out = [delta[[3, 4]] / localization_sigma_m, delta[[2]] / np.radians(localization_sigma_deg),
                [T[2, 3] / limits.FLOOR_HEIGHT_SIGMA_M]]
         if tilt_rad is None:  # the floor prior: the robot's up axis near the room's
-            out.append(T[:2, 2] / np.radians(limits.FLOOR_TILT_SIGMA_DEG))
+            out.append(T[:2, 2] / tilt_sigma)
         else:
             out.append((np.array(roll_pitch(T)) - tilt_rad) / tilt_sigma)
         T_robot_from_wall = invert(T_wall_from_room @ T)
@@ -207,8 +209,7 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
         return delta, J
 
     _check_innovation(whiten, basis, measured, T0, T_wall_from_room, wall, localization_sigma_m,
-                      localization_sigma_deg, limits.FLOOR_TILT_SIGMA_DEG if tilt is None else
-                      max(tilt.sigma_roll_deg, tilt.sigma_pitch_deg))
+                      localization_sigma_deg, float(np.degrees(tilt_sigma.max())))
     gates = LASER_GATES_M if laser is not None else (np.inf,)
     delta, J = solve(np.zeros(6), gates)
     covariance = np.linalg.inv(J.T @ J)
