@@ -224,6 +224,11 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
             if site_wall is None and options.wall_prior is None:
                 raise InputError("hardware sessions need --wall-prior FILE (T_wall_from_robot), or --site FILE "
                                  "--wall KEY with the robot's 2-D laser (--laser URL)")
+            if site_wall is None and options.inclinometer_url is not None:
+                # with a prior file the plane is snapped onto it: no fusion would read the inclinometer
+                raise InputError("--inclinometer is read by the full wall-pose fusion, which needs --site FILE "
+                                 "--wall KEY and --laser URL; with --wall-prior it would not be used",
+                                 "give --site and --laser, or drop --inclinometer")
             robot = _hardware_robot(options, rig, multi, site_wall)
         if room_map is not None:
             from arproj.run.room import run_room
