@@ -98,3 +98,21 @@ def test_the_inclinometer_replaces_the_floor_prior_and_the_map_grows(gl_context)
     assert np.all(sigmas[True] <= SIGMA_DEG * 1.001) and np.all(sigmas[False] > 3 * sigmas[True])
     # the prior cut the map to less than half (the pose term: the roll about the wall's normal); measured, all
     assert shares[False] < 0.6 and shares[True] > 0.95, shares
+
+
+def test_an_inclinometer_no_fusion_would_read_is_refused(tmp_path) -> None:
+    from arproj.run.project import SessionOptions, run_session
+    from geometry import Intrinsics
+    from geometry.errors import InputError
+    from geometry.rig import Rig
+
+    cam = Intrinsics.from_fov(1280, 800, 60.0)
+    Rig(intrinsics={"camera_left": cam, "camera_right": cam, "projector": cam}).save(tmp_path / "rig")
+    (tmp_path / "prior.yaml").write_text("T_wall_from_robot: [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]")
+    truth = shipped_walls()["small_test_wall"]
+    with pytest.raises(InputError, match="--inclinometer is read by the full wall-pose fusion"):
+        run_session(SessionOptions(truth=truth, rig_dir=tmp_path / "rig", wall_prior=tmp_path / "prior.yaml",
+                                   inclinometer_url="socket://127.0.0.1:9"), say=lambda _: None)
+    with pytest.raises(InputError, match="contradict"):
+        run_session(SessionOptions(truth=truth, sim=True, inclinometer_url="socket://127.0.0.1:9",
+                                   inclinometer=False), say=lambda _: None)
