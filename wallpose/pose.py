@@ -141,25 +141,22 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
     consistent with them adds its image line as a measurement; projector: its intrinsics, when it was on for the
     photos (the stretches of an edge it lights are not searched); tilt: the robot's roll and pitch measured by an
     inclinometer, which replace the floor's tilt prior (the start pose takes its tilt from it too: a floor
-    localization is level).
+    localization is level) unless the other measurements with the tilts left free contradict it beyond the 99.9 %
+    quantile (limits.TILT_CHI2_2_999): then the prior stays and `sources` says why the reading was not used. The
+    plane sees the tilt about the wall's horizontal axis, so a crooked or unzeroed inclinometer (or a wall out of
+    plumb) is caught there; the rotation about the wall's normal nothing else sees, so it is not checked.
     Raises NotEnoughEvidenceError when the plane contradicts the map (the pattern is on another wall).
     """
     if not 0 <= wall < len(room.T_room_from_walls):
         raise InputError(f"wall index {wall} is not in the room map (walls 0..{len(room.T_room_from_walls) - 1})")
-    T0 = np.asarray(localized_T_room_from_robot, dtype=np.float64)
+    T0_level = T0 = np.asarray(localized_T_room_from_robot, dtype=np.float64)
+    # the tilt rows: the floor prior (tilt_rad None) or a reading, each with its σ (the closures read them)
     tilt_rad: NDArray[np.float64] | None = None
     tilt_sigma = np.radians([limits.FLOOR_TILT_SIGMA_DEG] * 2)
-    if tilt is not None:
-        tilt_rad = np.radians([tilt.roll_deg, tilt.pitch_deg])
-        tilt_sigma = np.radians([tilt.sigma_roll_deg, tilt.sigma_pitch_deg])
-        # the start pose's heading and position, standing as the inclinometer says
-        T0 = make_pose(rotation_about([0.0, 0.0, 1.0], float(np.arctan2(T0[1, 0], T0[0, 0])))
-                       @ tilt_rotation(*tilt_rad), T0[:3, 3])
     T_wall_from_room = invert(room.T_room_from_walls[wall])
     basis, whiten = _plane_whitener(plane)
     measured = np.append(plane.normal, plane.distance)
-    sources = ["localization", "floor"] + ([] if tilt is None else ["inclinometer"]) + \
-        ["wall plane (cameras + projector)"]
+    sources = ["localization", "floor", "wall plane (cameras + projector)"]
     walls_room = [(Tw[:3, 2], Tw[:3, 3], size) for Tw, size in zip(room.T_room_from_walls, room.sizes_m, strict=True)]
     laser = None if laser_points_robot is None or len(laser_points_robot) == 0 \
         else np.asarray(laser_points_robot, dtype=np.float64)
@@ -208,9 +205,26 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
                     break
         return delta, J
 
+    gates = LASER_GATES_M if laser is not None else (np.inf,)
+    if tilt is not None:
+        reading = np.radians([tilt.roll_deg, tilt.pitch_deg])
+        # the start pose's heading and position, standing as the inclinometer says
+        T0 = make_pose(rotation_about([0.0, 0.0, 1.0], float(np.arctan2(T0[1, 0], T0[0, 0])))
+                       @ tilt_rotation(*reading), T0[:3, 3])
+        # first what the rest says of the tilts, left almost free: the plane sees the tilt about the wall's
+        # horizontal axis; a reading it contradicts (a crooked or unzeroed device, a wall out of plumb) is not used
+        tilt_sigma = np.radians([limits.TILT_CHECK_PRIOR_DEG] * 2)
+        d2 = _tilt_innovation(residuals, solve, gates, T0, reading, np.radians([tilt.sigma_roll_deg,
+                                                                                 tilt.sigma_pitch_deg]))
+        if d2 <= limits.TILT_CHI2_2_999:
+            tilt_rad, tilt_sigma = reading, np.radians([tilt.sigma_roll_deg, tilt.sigma_pitch_deg])
+            sources.insert(2, "inclinometer")
+        else:
+            T0, tilt_sigma = T0_level, np.radians([limits.FLOOR_TILT_SIGMA_DEG] * 2)
+            sources.insert(2, f"inclinometer not used: roll {tilt.roll_deg:.3f}°, pitch {tilt.pitch_deg:.3f}° "
+                              f"disagree with the wall plane (Mahalanobis² {d2:.0f})")
     _check_innovation(whiten, basis, measured, T0, T_wall_from_room, wall, localization_sigma_m,
                       localization_sigma_deg, float(np.degrees(tilt_sigma.max())))
-    gates = LASER_GATES_M if laser is not None else (np.inf,)
     delta, J = solve(np.zeros(6), gates)
     covariance = np.linalg.inv(J.T @ J)
     rejected: list[str] = []
@@ -261,6 +275,24 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
         sigma_normal_deg=float(np.degrees(np.sqrt(max(cov_r_wall[0, 0], cov_r_wall[1, 1])))),
         sigma_roll_deg=float(np.degrees(np.sqrt(cov_r_wall[2, 2]))), sources=sources,
         edges=[o for o, *_ in edge_block], edges_rejected=rejected)
+
+
+def _tilt_innovation(residuals: Callable[..., NDArray[np.float64]],
+                     solve: Callable[[NDArray[np.float64], Sequence[float]], tuple[NDArray[np.float64], NDArray]],
+                     gates: Sequence[float], T0: NDArray[np.float64], reading_rad: NDArray[np.float64],
+                     sigma_rad: NDArray[np.float64]) -> float:
+    """Mahalanobis² (2 degrees of freedom) of an inclinometer's (roll, pitch) reading against the pose the other
+    measurements give (residuals with the tilt rows weak, around T0)."""
+    delta, J = solve(np.zeros(6), gates)
+    covariance = np.linalg.inv(J.T @ J)
+
+    def rp(d: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.array(roll_pitch(T0 @ pose_from_vector(d)))
+
+    z = reading_rad - rp(delta)
+    G = _numeric_jacobian(rp, delta, rp(delta))
+    S = G @ covariance @ G.T + np.diag(np.asarray(sigma_rad) ** 2)
+    return float(z @ np.linalg.solve(S, z))
 
 
 def _numeric_jacobian(f: Callable[[NDArray[np.float64]], NDArray[np.float64]], delta: NDArray[np.float64],

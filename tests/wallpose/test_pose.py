@@ -131,3 +131,22 @@ def test_plane_of_another_wall_is_refused(sim_site, sim_estimate) -> None:
     with pytest.raises(NotEnoughEvidenceError, match="wall 1"):
         estimate_wall_pose(est, 1, room_map(sim_site), sim_site.localized_T_room_from_robot,
                            T_robot_from_projector)
+
+
+def test_an_inclinometer_reading_the_wall_plane_contradicts_is_not_used(sim_site, sim_estimate) -> None:
+    """A reading 0.5° off in pitch (a crooked mount, its zero not set): the plane sees the robot's tilt about the
+    wall's horizontal axis to a few hundredths of a degree, so the reading is left out and the floor prior stays,
+    rather than an estimate sure of a wrong tilt."""
+    views, _, est = sim_estimate
+    T_robot_from_projector = views.T_robot_from_camera_left @ est.T_camera_left_from_projector
+    args = (est, 0, room_map(sim_site), sim_site.localized_T_room_from_robot, T_robot_from_projector,
+            sim_site.laser_scan().points_robot())
+    good = inclinometer_reading(sim_site, np.random.default_rng(1))
+    crooked = TiltMeasurement(good.roll_deg, good.pitch_deg + 0.5, good.sigma_roll_deg, good.sigma_pitch_deg)
+    prior, used, refused = estimate_wall_pose(*args), estimate_wall_pose(*args, tilt=good), \
+        estimate_wall_pose(*args, tilt=crooked)
+    assert "inclinometer" in used.sources
+    assert "inclinometer" not in refused.sources
+    assert any(s.startswith("inclinometer not used") and "disagree with the wall plane" in s for s in refused.sources)
+    np.testing.assert_allclose(refused.covariance, prior.covariance, rtol=1e-6, atol=1e-14)
+    np.testing.assert_allclose(refused.T_wall_from_robot, prior.T_wall_from_robot, atol=1e-9)
