@@ -106,3 +106,18 @@ def rotation_angle_deg(R_a: ArrayLike, R_b: ArrayLike | None = None) -> float:
     s = 0.5 * np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
     c = (np.trace(R) - 1.0) / 2.0
     return float(np.degrees(np.arctan2(s, c)))
+
+
+def tilt_rotation(roll_rad: float, pitch_rad: float) -> NDArray[np.float64]:
+    """3x3 R_level_from_body of a body rolled about its x (forward) and pitched about its y (left) axis, in the
+    aerospace/ROS order R = Ry(pitch)·Rx(roll) (REP 103: positive roll lifts the left side, positive pitch
+    lowers the nose). roll_pitch() inverts it."""
+    return rotation_about((0.0, 1.0, 0.0), pitch_rad) @ rotation_about((1.0, 0.0, 0.0), roll_rad)
+
+
+def roll_pitch(R_up_from_body: ArrayLike) -> tuple[float, float]:
+    """(roll, pitch) rad of a body against gravity (z up in the frame R maps into), whatever its heading: what
+    an inclinometer on the body reads. The up direction in the body frame is R's last row,
+    (-sin p, cos p sin r, cos p cos r) for R = Rz(yaw)·Ry(p)·Rx(r)."""
+    up = np.asarray(R_up_from_body, dtype=np.float64)[2, :3]
+    return float(np.arctan2(up[1], up[2])), float(np.arcsin(np.clip(-up[0], -1.0, 1.0)))

@@ -56,6 +56,8 @@ MAX_NUISANCE_SIGMAS = 4.0      # a correction this far beyond its prior: the ima
 # --- full pose -----------------------------------------------------------------------------------------------
 FLOOR_HEIGHT_SIGMA_M = 0.002    # the robot stands on the floor: its height is known this well
 FLOOR_TILT_SIGMA_DEG = 0.1      # and its roll and pitch
+TILT_CHECK_PRIOR_DEG = 2.0      # an inclinometer's reading is checked against the pose with the tilts this free
+TILT_CHI2_2_999 = 13.82         # 99.9 % quantile, 2 degrees of freedom: a reading this far off is not used
 LASER_GATE_M = 0.08             # scan points farther than this from every wall are not used
 LASER_RANGE_SIGMA_M = 0.01
 

@@ -3,6 +3,10 @@ distance); the robot's localization, the floor it stands on and the 2-D laser sc
 side walls and room corner fix the position along the wall) fix the rest; where the wall's own edges (room
 corners, floor and ceiling lines) are in the cameras' view, their image lines do too (wallpose.edges).
 
+The robot's roll and pitch come from a prior (limits.FLOOR_TILT_SIGMA_DEG: "it stands on a floor about this
+level") unless an inclinometer on the robot measured them (TiltMeasurement): then its reading replaces the
+prior, and the estimate is as sure of the tilts as the inclinometer is.
+
 All are Gaussian measurements of one unknown, the robot's pose in the room, T_room_from_robot = T0 · exp(δ)
 with δ = (rotation vector, translation) in the robot frame around the localized pose T0; a few Gauss–Newton
 steps give δ and its covariance. T_wall_from_robot = inv(T_room_from_wall) · T_room_from_robot, so the same δ
@@ -20,7 +24,15 @@ from numpy.typing import NDArray
 
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
-from geometry.poses import invert, make_pose, pose_from_vector, transform_points
+from geometry.poses import (
+    invert,
+    make_pose,
+    pose_from_vector,
+    roll_pitch,
+    rotation_about,
+    tilt_rotation,
+    transform_points,
+)
 from wallpose import limits
 from wallpose.edges import CameraImage, EdgeObservation, Projector, find_wall_edges, project_undistorted
 from wallpose.estimate import PlaneEstimate
@@ -54,6 +66,22 @@ class WallPose:
     sources: list[str] = field(default_factory=list)
     edges: list[EdgeObservation] = field(default_factory=list)
     edges_rejected: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class TiltMeasurement:
+    """The robot's roll (about its x, forward) and pitch (about its y, left) against gravity with their 1-σ,
+    degrees, as an inclinometer on its body reads them (geometry.poses.roll_pitch names the angles)."""
+
+    roll_deg: float
+    pitch_deg: float
+    sigma_roll_deg: float
+    sigma_pitch_deg: float
+
+    def __post_init__(self) -> None:
+        values = (self.roll_deg, self.pitch_deg, self.sigma_roll_deg, self.sigma_pitch_deg)
+        if not all(np.isfinite(values)) or not (self.sigma_roll_deg > 0 and self.sigma_pitch_deg > 0):
+            raise InputError(f"a tilt measurement needs finite angles and positive σ, got {values}")
 
 
 @dataclass
@@ -102,7 +130,7 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
                        localization_sigma_m: float = 0.03, localization_sigma_deg: float = 1.0,
                        projector_covariance: NDArray | None = None, *,
                        camera_images: Sequence[CameraImage] | None = None,
-                       projector: Intrinsics | None = None) -> WallPose:
+                       projector: Intrinsics | None = None, tilt: TiltMeasurement | None = None) -> WallPose:
     """Fuse the measured plane of wall `wall` with localization, floor and (optionally) a laser scan.
 
     laser_points_robot: (n, 3) scan returns in the robot frame; T_robot_from_projector: the projector's pose
@@ -111,12 +139,20 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
     camera_images: the photos (wallpose.edges.camera_images) in which to look for the wall's edges
     (room corners, floor and ceiling lines) around where the other measurements put them; each edge found and
     consistent with them adds its image line as a measurement; projector: its intrinsics, when it was on for the
-    photos (the stretches of an edge it lights are not searched).
+    photos (the stretches of an edge it lights are not searched); tilt: the robot's roll and pitch measured by an
+    inclinometer, which replace the floor's tilt prior (the start pose takes its tilt from it too: a floor
+    localization is level) unless the other measurements with the tilts left free contradict it beyond the 99.9 %
+    quantile (limits.TILT_CHI2_2_999): then the prior stays and `sources` says why the reading was not used. The
+    plane sees the tilt about the wall's horizontal axis, so a crooked or unzeroed inclinometer (or a wall out of
+    plumb) is caught there; the rotation about the wall's normal nothing else sees, so it is not checked.
     Raises NotEnoughEvidenceError when the plane contradicts the map (the pattern is on another wall).
     """
     if not 0 <= wall < len(room.T_room_from_walls):
         raise InputError(f"wall index {wall} is not in the room map (walls 0..{len(room.T_room_from_walls) - 1})")
-    T0 = np.asarray(localized_T_room_from_robot, dtype=np.float64)
+    T0_level = T0 = np.asarray(localized_T_room_from_robot, dtype=np.float64)
+    # the tilt rows: the floor prior (tilt_rad None) or a reading, each with its σ (the closures read them)
+    tilt_rad: NDArray[np.float64] | None = None
+    tilt_sigma = np.radians([limits.FLOOR_TILT_SIGMA_DEG] * 2)
     T_wall_from_room = invert(room.T_room_from_walls[wall])
     basis, whiten = _plane_whitener(plane)
     measured = np.append(plane.normal, plane.distance)
@@ -132,8 +168,11 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
     def residuals(delta: NDArray[np.float64], gate: float) -> NDArray[np.float64]:
         T = T0 @ pose_from_vector(delta)
         out = [delta[[3, 4]] / localization_sigma_m, delta[[2]] / np.radians(localization_sigma_deg),
-               [T[2, 3] / limits.FLOOR_HEIGHT_SIGMA_M],
-               T[:2, 2] / np.radians(limits.FLOOR_TILT_SIGMA_DEG)]
+               [T[2, 3] / limits.FLOOR_HEIGHT_SIGMA_M]]
+        if tilt_rad is None:  # the floor prior: the robot's up axis near the room's
+            out.append(T[:2, 2] / tilt_sigma)
+        else:
+            out.append((np.array(roll_pitch(T)) - tilt_rad) / tilt_sigma)
         T_robot_from_wall = invert(T_wall_from_room @ T)
         n = T_robot_from_wall[:3, 2]
         predicted = np.append(n, -n @ T_robot_from_wall[:3, 3])
@@ -166,9 +205,26 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
                     break
         return delta, J
 
-    _check_innovation(whiten, basis, measured, T0, T_wall_from_room, wall, localization_sigma_m,
-                      localization_sigma_deg)
     gates = LASER_GATES_M if laser is not None else (np.inf,)
+    if tilt is not None:
+        reading = np.radians([tilt.roll_deg, tilt.pitch_deg])
+        # the start pose's heading and position, standing as the inclinometer says
+        T0 = make_pose(rotation_about([0.0, 0.0, 1.0], float(np.arctan2(T0[1, 0], T0[0, 0])))
+                       @ tilt_rotation(*reading), T0[:3, 3])
+        # first what the rest says of the tilts, left almost free: the plane sees the tilt about the wall's
+        # horizontal axis; a reading it contradicts (a crooked or unzeroed device, a wall out of plumb) is not used
+        tilt_sigma = np.radians([limits.TILT_CHECK_PRIOR_DEG] * 2)
+        d2 = _tilt_innovation(residuals, solve, gates, T0, reading, np.radians([tilt.sigma_roll_deg,
+                                                                                 tilt.sigma_pitch_deg]))
+        if d2 <= limits.TILT_CHI2_2_999:
+            tilt_rad, tilt_sigma = reading, np.radians([tilt.sigma_roll_deg, tilt.sigma_pitch_deg])
+            sources.insert(2, "inclinometer")
+        else:
+            T0, tilt_sigma = T0_level, np.radians([limits.FLOOR_TILT_SIGMA_DEG] * 2)
+            sources.insert(2, f"inclinometer not used: roll {tilt.roll_deg:.3f}°, pitch {tilt.pitch_deg:.3f}° "
+                              f"disagree with the wall plane (Mahalanobis² {d2:.0f})")
+    _check_innovation(whiten, basis, measured, T0, T_wall_from_room, wall, localization_sigma_m,
+                      localization_sigma_deg, float(np.degrees(tilt_sigma.max())))
     delta, J = solve(np.zeros(6), gates)
     covariance = np.linalg.inv(J.T @ J)
     rejected: list[str] = []
@@ -221,6 +277,24 @@ def estimate_wall_pose(plane: PlaneEstimate, wall: int, room: RoomMap, localized
         edges=[o for o, *_ in edge_block], edges_rejected=rejected)
 
 
+def _tilt_innovation(residuals: Callable[..., NDArray[np.float64]],
+                     solve: Callable[[NDArray[np.float64], Sequence[float]], tuple[NDArray[np.float64], NDArray]],
+                     gates: Sequence[float], T0: NDArray[np.float64], reading_rad: NDArray[np.float64],
+                     sigma_rad: NDArray[np.float64]) -> float:
+    """Mahalanobis² (2 degrees of freedom) of an inclinometer's (roll, pitch) reading against the pose the other
+    measurements give (residuals with the tilt rows weak, around T0)."""
+    delta, J = solve(np.zeros(6), gates)
+    covariance = np.linalg.inv(J.T @ J)
+
+    def rp(d: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.array(roll_pitch(T0 @ pose_from_vector(d)))
+
+    z = reading_rad - rp(delta)
+    G = _numeric_jacobian(rp, delta, rp(delta))
+    S = G @ covariance @ G.T + np.diag(np.asarray(sigma_rad) ** 2)
+    return float(z @ np.linalg.solve(S, z))
+
+
 def _numeric_jacobian(f: Callable[[NDArray[np.float64]], NDArray[np.float64]], delta: NDArray[np.float64],
                       f0: NDArray[np.float64], step: float = 1e-7) -> NDArray[np.float64]:
     """(len(f0), 6) forward differences of f around the pose increment delta (f0 = f(delta))."""
@@ -259,15 +333,17 @@ def _predicted_plane(T_room_from_robot: NDArray, T_wall_from_room: NDArray) -> N
 
 
 def _check_innovation(whiten: NDArray, basis: NDArray, measured: NDArray, T0: NDArray,
-                      T_wall_from_room: NDArray, wall: int, sigma_m: float, sigma_deg: float) -> None:
-    """Before fusing: is the measured plane where the map and the localization expect that wall to be?"""
+                      T_wall_from_room: NDArray, wall: int, sigma_m: float, sigma_deg: float,
+                      tilt_sigma_deg: float = limits.FLOOR_TILT_SIGMA_DEG) -> None:
+    """Before fusing: is the measured plane where the map and the localization expect that wall to be? (T0's
+    tilt known to tilt_sigma_deg: the floor prior's, or the inclinometer's.)"""
     z0 = basis @ (_predicted_plane(T0, T_wall_from_room) - measured)
     G = np.empty((3, 6))
     for k in range(6):
         h = np.zeros(6)
         h[k] = 1e-7
         G[:, k] = (basis @ (_predicted_plane(T0 @ pose_from_vector(h), T_wall_from_room) - measured) - z0) / 1e-7
-    tilt = np.radians(limits.FLOOR_TILT_SIGMA_DEG)
+    tilt = np.radians(tilt_sigma_deg)
     prior = np.diag([tilt, tilt, np.radians(sigma_deg), sigma_m, sigma_m, limits.FLOOR_HEIGHT_SIGMA_M]) ** 2
     cov_z = np.linalg.inv(whiten.T @ whiten)
     S = cov_z + G @ prior @ G.T

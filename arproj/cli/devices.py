@@ -31,10 +31,12 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                  "faults): the same as `arproj scan --sim --seed N` gives the same samples."),
         urls: Path = typer.Option(None, "--urls", help="Also write the URLs to this YAML file "
                                   "(format arproj-devices/1: urls: {drives, scanner, base, laser, head}, with "
-                                  "--projection also screen, camera_left, camera_right, projection_laser)."),
+                                  "--projection also screen, camera_left, camera_right, projection_laser, "
+                                  "inclinometer)."),
         projection: bool = typer.Option(False, "--projection", help="Also serve the projection robot on the "
                                         "simulated site around the wall (the site `arproj project --sim --site` "
-                                        "builds): the beamer's screen, both cameras, the head and its 2-D laser."),
+                                        "builds): the beamer's screen, both cameras, the head, its 2-D laser and "
+                                        "its inclinometer."),
         distance: float = typer.Option(2.5, "--distance", help="--projection: the projection robot's distance "
                                        "to the wall, metres (as `arproj project --distance`)."),
     ) -> None:
@@ -69,7 +71,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             if projection:
                 console.print(f"project with: arproj project --site SITE.yaml --wall KEY --rig RIG --screen "
                               f"{found['screen']} --left {found['camera_left']} --right {found['camera_right']} "
-                              f"--head {found['head']} --laser {found['projection_laser']}", highlight=False,
+                              f"--head {found['head']} --laser {found['projection_laser']} "
+                              f"--inclinometer {found['inclinometer']}", highlight=False,
                               soft_wrap=True)
             console.print("Ctrl-C stops them", highlight=False)
             console.file.flush()

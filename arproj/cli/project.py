@@ -7,7 +7,7 @@
     arproj project --sim --site site.yaml --wall small_test_wall [--head URL]   # found again from the site file
     arproj project --sim --room OUT/map/room.glb --follow '0:1.5,1.2;0:0.3,1.2'  # several walls of one room
     arproj project --site site.yaml --wall K --rig RIG --head URL --laser URL --left CAM --right CAM \
-        --screen tcp://HOST:PORT                      # hardware: found again by the robot's 2-D laser
+        --screen tcp://HOST:PORT [--inclinometer URL]  # hardware: found again by the robot's 2-D laser
 """
 
 from __future__ import annotations
@@ -75,6 +75,15 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                       "port or socket:// URL, the laser protocol `arproj scan --laser` speaks); "
                                       "with --site it finds the wall again. Its place on the robot is the rig's "
                                       "T_robot_from_laser."),
+        inclinometer_url: str = typer.Option(None, "--inclinometer", help="The robot's inclinometer (serial port "
+                                             "or socket:// URL, devices/inclinometer.py; e.g. the one `arproj "
+                                             "devices serve --projection` serves): its roll and pitch replace the "
+                                             "wall-pose fusion's floor prior (0.1°, 'it stands on a level floor'), "
+                                             "which is most of the bound that cuts the map at 2-4 m. Used where "
+                                             "the full pose is fused: --sim, or --site with --laser. --sim "
+                                             "without it reads a simulated one on the site."),
+        no_inclinometer: bool = typer.Option(False, "--no-inclinometer", help="--sim: no inclinometer, the "
+                                             "floor prior alone (what a robot without one can show)."),
         left: str = typer.Option("0", "--left", help="Left camera: index, file or URL (hardware)."),
         right: str = typer.Option("1", "--right", help="Right camera: index, file or URL (hardware)."),
         wall_prior: Path = typer.Option(None, "--wall-prior", help="Hardware: YAML with T_wall_from_robot "
@@ -127,6 +136,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             follow=_points(follow, "--follow") if follow else [], cycles=cycles, output=output, window=window,
             screen=screen, head_url=head_url, laser_url=laser_url, left=left, right=right, wall_prior=wall_prior,
             head_fault=head_fault, commands=_stdin_lines() if interactive else None, site=site,
+            inclinometer_url=inclinometer_url, inclinometer=not no_inclinometer,
             site_key=wall_key if site is not None else None, record=record,
             view=view, room=room, room_aims=room_aims)
         if interactive:  # the terminal is the user's after the first cycle: no spinner under their typing

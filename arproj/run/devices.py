@@ -10,8 +10,9 @@ on the same simulated site `arproj scan --sim` builds, so a scan against them gi
 
 With `projection`, the projection robot's site is served instead of the bare head (arproj.sim.live.LiveSite on
 the site `arproj project --sim --site` builds around the wall, simulated_projection_scene): the beamer's screen
-(tcp://), the two cameras (MJPEG over http://), the head on it and its 2-D laser (`projection_laser`, the
-laser's line protocol) — what `arproj project --screen --left --right --head --laser` opens on hardware.
+(tcp://), the two cameras (MJPEG over http://), the head on it, its 2-D laser (`projection_laser`, the
+laser's line protocol) and its inclinometer — what `arproj project --screen --left --right --head --laser
+--inclinometer` opens on hardware.
 """
 
 from __future__ import annotations
@@ -112,7 +113,7 @@ class _ProjectionSite:
     def urls(self) -> dict[str, str]:
         u = self.live.urls
         return {"screen": u.screen, "camera_left": u.camera_left, "camera_right": u.camera_right, "head": u.head,
-                self.PROJECTION_LASER: u.laser2d}
+                self.PROJECTION_LASER: u.laser2d, "inclinometer": u.inclinometer}
 
     def close(self) -> None:
         self.live.close()
@@ -120,7 +121,8 @@ class _ProjectionSite:
 
 @register_simulator("projection site")
 def projection_site(request: ServeRequest) -> _ProjectionSite | None:
-    """The projection robot on the simulated site around the wall: screen, cameras, head and 2-D laser."""
+    """The projection robot on the simulated site around the wall: screen, cameras, head, 2-D laser and
+    inclinometer."""
     return _ProjectionSite(request) if request.projection else None
 
 

@@ -44,6 +44,8 @@ class SessionOptions:
     screen: str = "0"     # --window's display, or a screen server tcp://HOST:PORT (frames sent there)
     head_url: str | None = None
     laser_url: str | None = None  # hardware: the projection robot's 2-D laser (devices/laser2d.py)
+    inclinometer_url: str | None = None  # the robot's inclinometer (devices/inclinometer.py), hardware or served
+    inclinometer: bool = True  # --sim without inclinometer_url: a simulated one on the site (False: the prior)
     left: str = "0"
     right: str = "1"
     wall_prior: Path | None = None
@@ -183,6 +185,8 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
         if options.sim and options.laser_url is not None:
             raise InputError("--laser reads the robot's laser at a URL on hardware; with --sim the simulated "
                              "site's laser is read", "drop --laser, or run without --sim")
+        if options.inclinometer_url is not None and not options.inclinometer:
+            raise InputError("--inclinometer URL and --no-inclinometer contradict each other", "give one")
         if options.sim:
             from arproj.sim.site import Site
             from render.gl import create_context
@@ -209,7 +213,8 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
                                            seed=options.seed, head_faults=_head_faults(options.head_fault),
                                            timeout_s=0.1 if options.head_url is None else 0.5,
                                            head_url=options.head_url, T_room_from_map=T_room_from_map,
-                                           site_wall=site_wall)
+                                           site_wall=site_wall, inclinometer=options.inclinometer,
+                                           inclinometer_url=options.inclinometer_url)
         else:
             if rig is None:
                 raise InputError("no rig given", "pass --rig RIG_DIR (from `arproj calibrate`), or --sim")
@@ -219,6 +224,11 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
             if site_wall is None and options.wall_prior is None:
                 raise InputError("hardware sessions need --wall-prior FILE (T_wall_from_robot), or --site FILE "
                                  "--wall KEY with the robot's 2-D laser (--laser URL)")
+            if site_wall is None and options.inclinometer_url is not None:
+                # with a prior file the plane is snapped onto it: no fusion would read the inclinometer
+                raise InputError("--inclinometer is read by the full wall-pose fusion, which needs --site FILE "
+                                 "--wall KEY and --laser URL; with --wall-prior it would not be used",
+                                 "give --site and --laser, or drop --inclinometer")
             robot = _hardware_robot(options, rig, multi, site_wall)
         if room_map is not None:
             from arproj.run.room import run_room
@@ -241,7 +251,7 @@ def run_session(options: SessionOptions, say: Callable[[str], None] = print) -> 
 def _hardware_robot(options: SessionOptions, rig: Rig, output: MultiOutput, site_wall: SiteWall | None) -> Any:
     """The robot on hardware: cameras, head and (--laser) the 2-D laser, at their URLs; whatever was opened is
     closed again when a later device fails."""
-    from arproj.session.robot_io import DeviceLaser, HardwareRobot
+    from arproj.session.robot_io import DeviceInclinometer, DeviceLaser, HardwareRobot
 
     laser = None
     if options.laser_url is not None:
@@ -252,14 +262,15 @@ def _hardware_robot(options: SessionOptions, rig: Rig, output: MultiOutput, site
                              "(poses: T_robot_from_laser)", "add T_robot_from_laser (4x4, metres, from the "
                              "robot's drawing) to the rig file's poses") from None
         laser = DeviceLaser(options.laser_url, T_robot_from_laser)
-    head = None
+    head = inclinometer = None
     try:
         head = PanTiltHead(options.head_url) if options.head_url else None
+        inclinometer = DeviceInclinometer(options.inclinometer_url) if options.inclinometer_url else None
         return HardwareRobot(options.left, options.right, rig.intrinsics["camera_left"],
                              rig.intrinsics["camera_right"], output, head, options.wall_prior, laser=laser,
-                             site_wall=site_wall)
+                             site_wall=site_wall, inclinometer=inclinometer)
     except BaseException:
-        for device in (head, laser):
+        for device in (head, laser, inclinometer):
             if device is not None:
                 device.close()
         raise

@@ -1,8 +1,9 @@
-"""What the session talks to: cameras, beamer, head, laser and a prior for the wall frame.
+"""What the session talks to: cameras, beamer, head, laser, inclinometer and a prior for the wall frame.
 
 Two implementations with one interface: SimulatedRobot (the simulated site, its head reached through the
-Pelco-D head simulator over socket:// — the real driver's code path) and HardwareRobot (OpenCV cameras, the
-beamer window, a head at a serial URL).
+Pelco-D head simulator over socket:// — the real driver's code path — and its inclinometer through the
+inclinometer's simulator likewise) and HardwareRobot (OpenCV cameras, the beamer window, a head and an
+inclinometer at serial URLs).
 """
 
 from __future__ import annotations
@@ -22,12 +23,12 @@ from arproj.site_file import SiteWall
 from calibration.capture import SETTLE_TIMEOUT_S
 from devices.errors import DeviceError, DeviceResetError
 from devices.pelco_d import PanTiltHead
-from devices.sim import HeadFaults, HeadSimulator
+from devices.sim import HeadFaults, HeadSimulator, InclinometerSim
 from geometry.errors import InputError
 from geometry.intrinsics import Intrinsics
-from geometry.poses import invert
+from geometry.poses import invert, roll_pitch
 from geometry.rig import Rig
-from wallpose.pose import RoomMap
+from wallpose.pose import RoomMap, TiltMeasurement
 
 if TYPE_CHECKING:
     from arproj.sim.protocols import RobotSite
@@ -61,7 +62,8 @@ class PoseInputs:
     """What the full wall-pose estimate fuses with the plane besides the laser scan: the room's walls, which of
     them holds the map, the robot's start pose in the room and its σ (wallpose.pose.estimate_wall_pose), the
     map's wall frame in the room (None: the room wall's own frame) and a σ to add in the wall's plane (how well
-    that frame is known in the room)."""
+    that frame is known in the room); tilt: the robot's roll and pitch read from its inclinometer (None: the
+    fusion's floor prior)."""
 
     room: RoomMap
     wall_index: int
@@ -71,16 +73,53 @@ class PoseInputs:
     T_room_from_map: NDArray[np.float64] | None = None
     extra_sigma_m: float = 0.0
     source: str = "localization"
+    tilt: TiltMeasurement | None = None
 
 
 def site_pose_inputs(site_wall: SiteWall, scan_points: NDArray[np.float64], laser_origin: NDArray[np.float64],
-                     normal_robot: NDArray[np.float64] | None) -> PoseInputs:
-    """The full estimate's inputs from a site file: its room, the start pose from the laser's fix in it."""
+                     normal_robot: NDArray[np.float64] | None, tilt: TiltMeasurement | None = None) -> PoseInputs:
+    """The full estimate's inputs from a site file: its room, the start pose from the laser's fix in it (and the
+    inclinometer's reading, when the robot has one)."""
     fix = fix_in_site(scan_points, laser_origin, site_wall, normal_robot)
     return PoseInputs(site_wall.room_map(), site_wall.wall_index, fix.T_room_from_robot, START_SIGMA_M,
                       START_SIGMA_DEG, site_wall.T_room_from_wall,
                       float(np.hypot(site_wall.sigma_along_m, site_wall.sigma_height_m)),
-                      f"laser fix in the site's room ({' and '.join(fix.sides)} side wall)")
+                      f"laser fix in the site's room ({' and '.join(fix.sides)} side wall)", tilt)
+
+
+INCLINOMETER_HINT = "check the inclinometer's cable and power, or its URL (--inclinometer)"
+
+
+class DeviceInclinometer:
+    """The robot's inclinometer at a serial URL (devices/inclinometer.py): each reading as the wall-pose fusion
+    takes it."""
+
+    def __init__(self, url: str, timeout_s: float = 0.5) -> None:
+        from devices.crclines import CrcLineFramer
+        from devices.inclinometer import Inclinometer
+        from devices.link import SerialLink
+
+        self.link = SerialLink(url, CrcLineFramer(), "inclinometer", timeout_s=timeout_s, hint=INCLINOMETER_HINT)
+        self.link.open()
+        try:
+            self.device = Inclinometer(self.link)
+            self.model = self.device.identify()
+        except BaseException:
+            self.link.close()
+            raise
+
+    def reading(self) -> TiltMeasurement:
+        r = self.device.tilt()
+        return TiltMeasurement(r.roll_deg, r.pitch_deg, r.sigma_roll_deg, r.sigma_pitch_deg)
+
+    def close(self) -> None:
+        self.link.close()
+
+
+def true_tilt_deg(site: RobotSite) -> tuple[float, float]:
+    """The simulated robot's true (roll, pitch) against gravity, degrees: what its inclinometer measures."""
+    roll, pitch = roll_pitch(site.T_room_from_robot)
+    return float(np.degrees(roll)), float(np.degrees(pitch))
 
 
 def site_wall_prior(site_wall: SiteWall, scan_points: NDArray[np.float64] | None,
@@ -107,12 +146,15 @@ class SimulatedRobot:
     lower-left corner). site_wall: find the wall again from a site file (arproj.site_file) instead of the
     site's truth room and the simulated localization: the laser's fix in the file's room, as on hardware.
     head_sim None: the head is another process's (`arproj devices serve`); the site's head follows the angles
-    it reports.
+    it reports. inclinometer: the robot's inclinometer (its readings replace the fusion's floor-tilt prior; None:
+    the prior), inclinometer_sim the in-process simulator behind it (closed with the robot).
     """
 
     def __init__(self, site: RobotSite, wall_index: int, head_sim: HeadSimulator | None, head: PanTiltHead,
                  output: FrameOutput | None = None, prior: str = "measured",
-                 T_room_from_map: NDArray[np.float64] | None = None, site_wall: SiteWall | None = None) -> None:
+                 T_room_from_map: NDArray[np.float64] | None = None, site_wall: SiteWall | None = None,
+                 inclinometer: DeviceInclinometer | None = None,
+                 inclinometer_sim: InclinometerSim | None = None) -> None:
         self.site = site
         self.wall_index = int(wall_index)
         self.head_sim = head_sim
@@ -124,30 +166,45 @@ class SimulatedRobot:
         self.T_room_from_map = np.asarray(self.wall.T_room_from_wall if T_room_from_map is None else T_room_from_map,
                                           dtype=np.float64)
         self.site_wall = site_wall
+        self.inclinometer = inclinometer
+        self.inclinometer_sim = inclinometer_sim
 
     @classmethod
     def on_site(cls, site: RobotSite, wall_index: int = 0, output: FrameOutput | None = None, prior: str = "measured",
                 *, seed: int = 0, head_faults: HeadFaults | None = None, head_speed_deg_s: float | None = None,
                 timeout_s: float = 0.2, retries: int = 3, settle_timeout_s: float = 3.0,
                 head_url: str | None = None, T_room_from_map: NDArray[np.float64] | None = None,
-                site_wall: SiteWall | None = None) -> SimulatedRobot:
+                site_wall: SiteWall | None = None, inclinometer: bool = True,
+                inclinometer_url: str | None = None) -> SimulatedRobot:
         """The robot on `site`, its head a HeadSimulator (seeded; `head_faults` injected; `head_speed_deg_s`,
         None: the simulator's own) started at the angles the site's head is commanded to, and reached over
         Pelco-D on socket:// with these timeouts, as a real head is; or the head at head_url (another
-        process's, e.g. `arproj devices serve`), moved to those angles first."""
-        if head_url is not None:
-            head = PanTiltHead(head_url, timeout_s=timeout_s, retries=retries, settle_timeout_s=settle_timeout_s)
-            try:
+        process's, e.g. `arproj devices serve`), moved to those angles first. Its inclinometer: the one at
+        inclinometer_url (another process's), else with `inclinometer` an InclinometerSim (seeded) reading the
+        site's true tilt, reached over socket:// as a real one is; neither: none (the floor prior)."""
+        incl_sim = InclinometerSim(lambda: true_tilt_deg(site), seed=seed) \
+            if inclinometer and inclinometer_url is None else None
+        opened: list = [] if incl_sim is None else [incl_sim]
+        try:
+            url = inclinometer_url if incl_sim is None else incl_sim.url
+            incl = None if url is None else DeviceInclinometer(url)
+            if incl is not None:
+                opened.append(incl)
+            if head_url is not None:
+                head = PanTiltHead(head_url, timeout_s=timeout_s, retries=retries, settle_timeout_s=settle_timeout_s)
+                opened.append(head)
                 head.move_to(*(float(a) for a in site.head_angles_cmd_deg[:2]))
-            except BaseException:
-                head.close()
-                raise
-            return cls(site, wall_index, None, head, output, prior, T_room_from_map, site_wall)
-        speed = {} if head_speed_deg_s is None else {"speed_deg_s": head_speed_deg_s}
-        head_sim = HeadSimulator(faults=head_faults, seed=seed, **speed,
-                                 initial_deg=tuple(float(a) for a in site.head_angles_cmd_deg[:2]))
-        head = PanTiltHead(head_sim.url, timeout_s=timeout_s, retries=retries, settle_timeout_s=settle_timeout_s)
-        return cls(site, wall_index, head_sim, head, output, prior, T_room_from_map, site_wall)
+                return cls(site, wall_index, None, head, output, prior, T_room_from_map, site_wall, incl, incl_sim)
+            speed = {} if head_speed_deg_s is None else {"speed_deg_s": head_speed_deg_s}
+            head_sim = HeadSimulator(faults=head_faults, seed=seed, **speed,
+                                     initial_deg=tuple(float(a) for a in site.head_angles_cmd_deg[:2]))
+            opened.append(head_sim)
+            head = PanTiltHead(head_sim.url, timeout_s=timeout_s, retries=retries, settle_timeout_s=settle_timeout_s)
+            return cls(site, wall_index, head_sim, head, output, prior, T_room_from_map, site_wall, incl, incl_sim)
+        except BaseException:
+            for device in reversed(opened):
+                device.close()
+            raise
 
     def sync_head(self) -> None:
         """Move the site's head to where the simulated head physically is (slip included; a head of another
@@ -176,14 +233,16 @@ class SimulatedRobot:
         in-plane part comes from truth. normal_robot: the measured plane's normal (orients a site's laser fix)."""
         if self.prior != "measured":
             return None
+        tilt = None if self.inclinometer is None else self.inclinometer.reading()
         if self.site_wall is not None:
             return site_pose_inputs(self.site_wall, self.laser_points(), self.site.T_robot_from_laser[:3, 3],
-                                    normal_robot)
+                                    normal_robot, tilt)
         from arproj.sim.wallpose_trial import room_map
 
         r = self.site.scene["robot"]
         return PoseInputs(room_map(self.site), self.wall_index, self.site.localized_T_room_from_robot,
-                          float(r["localization_sigma_m"]), float(r["localization_sigma_deg"]), self.T_room_from_map)
+                          float(r["localization_sigma_m"]), float(r["localization_sigma_deg"]), self.T_room_from_map,
+                          tilt=tilt)
 
     def wall_prior(self) -> tuple[NDArray[np.float64], float, str]:
         if self.site_wall is not None and self.prior == "measured":
@@ -198,6 +257,10 @@ class SimulatedRobot:
         self.head.close()
         if self.head_sim is not None:
             self.head_sim.close()
+        if self.inclinometer is not None:
+            self.inclinometer.close()
+        if self.inclinometer_sim is not None:
+            self.inclinometer_sim.close()
 
 
 def open_camera(source: str, intr: Intrinsics, name: str) -> cv2.VideoCapture:
@@ -290,12 +353,13 @@ class HardwareRobot:
     is shown), the beamer output and a Pelco-D head. The in-plane part of the wall frame comes from a prior
     file (T_wall_from_robot, e.g. from the robot's localization in the building plan), or with a site file and
     the robot's 2-D laser from the laser's fix in the site's room (arproj.session.relocalise), as on the
-    simulated site."""
+    simulated site; there an inclinometer's readings replace the fusion's floor-tilt prior."""
 
     def __init__(self, left: str, right: str, camera_left: Intrinsics, camera_right: Intrinsics,
                  output: FrameOutput, head: PanTiltHead | None, wall_prior_path: str | Path | None = None,
                  in_plane_sigma_m: float = 0.01, settle_s: float = 0.15, laser: DeviceLaser | None = None,
-                 site_wall: SiteWall | None = None, settle_timeout_s: float = SETTLE_TIMEOUT_S) -> None:
+                 site_wall: SiteWall | None = None, settle_timeout_s: float = SETTLE_TIMEOUT_S,
+                 inclinometer: DeviceInclinometer | None = None) -> None:
         from calibration.capture import LiveCamera
 
         if site_wall is not None and laser is None:
@@ -306,7 +370,7 @@ class HardwareRobot:
                              "--wall KEY with the robot's 2-D laser (--laser URL)")
         self._prior = None if wall_prior_path is None else read_wall_prior(wall_prior_path)
         self.in_plane_sigma_m = in_plane_sigma_m
-        self.laser, self.site_wall = laser, site_wall
+        self.laser, self.site_wall, self.inclinometer = laser, site_wall, inclinometer
         self._left = LiveCamera(open_camera(left, camera_left, "camera_left"), "camera_left")
         try:
             self._right = LiveCamera(open_camera(right, camera_right, "camera_right"), "camera_right")
@@ -332,7 +396,8 @@ class HardwareRobot:
     def full_pose_inputs(self, normal_robot: NDArray[np.float64] | None = None) -> PoseInputs | None:
         if self.site_wall is None or self.laser is None:
             return None  # the in-plane part comes from the wall-prior file
-        return site_pose_inputs(self.site_wall, self.laser.points(), self.laser.origin, normal_robot)
+        tilt = None if self.inclinometer is None else self.inclinometer.reading()
+        return site_pose_inputs(self.site_wall, self.laser.points(), self.laser.origin, normal_robot, tilt)
 
     def wall_prior(self) -> tuple[NDArray[np.float64], float, str]:
         if self.site_wall is not None and self.laser is not None:
@@ -345,6 +410,8 @@ class HardwareRobot:
         self._right.close()
         if self.laser is not None:
             self.laser.close()
+        if self.inclinometer is not None:
+            self.inclinometer.close()
         if self.head is not None:
             self.head.close()
         self.output.close()

@@ -255,7 +255,7 @@ class ProjectionSession:
         pose = estimate_wall_pose(plane, full.wall_index, full.room, full.localized_T_room_from_robot,
                                   T_robot_from_projector, scan, full.sigma_m, full.sigma_deg,
                                   camera_images=None if images is None else camera_images(views, *images),
-                                  projector=views.projector)
+                                  projector=views.projector, tilt=full.tilt)
         T_wall_from_robot = pose.T_wall_from_robot if full.T_room_from_map is None else \
             invert(full.T_room_from_map) @ pose.T_room_from_robot  # the map's frame, in the room wall's plane
         in_plane = float(np.sqrt(pose.sigma_along_m ** 2 + pose.sigma_height_m ** 2 + full.extra_sigma_m ** 2))

@@ -12,6 +12,8 @@ Pelco-D head on a serial port, a 2-D laser — is served here on 127.0.0.1 from 
                                              T_robot_from_laser
     laser2d       socket://127.0.0.1:S       the same laser in the 2-D laser's line protocol (devices/laser2d.py,
                                              one head H), as `arproj project --laser` reads it on hardware
+    inclinometer  socket://127.0.0.1:T       the robot's inclinometer (devices/inclinometer.py): the robot's true
+                                             roll and pitch on the site's floor, its bias and noise on top
     board         http://127.0.0.1:Q/board/next?plan=stereo|wall|mount   the site's "person" puts the printed
                                              board at its next pose (stereo: held in front of both cameras as
                                              the wizard's simulated station does; wall: in the beam before the
@@ -59,8 +61,8 @@ from numpy.typing import NDArray
 
 from calibration.boards import parse_board
 from calibration.defaults import DEFAULT_BOARD
-from devices.sim import DeviceServer, HeadFaults, HeadSimulator
-from geometry.poses import invert, make_pose, rotation_about
+from devices.sim import DeviceServer, HeadFaults, HeadSimulator, InclinometerSim
+from geometry.poses import invert, make_pose, roll_pitch, rotation_about
 from scanner.sim.devices import BufferedLaserSim
 
 DEFAULT_FPS = 20.0
@@ -95,6 +97,7 @@ class LiveSiteUrls:
     laser2d: str
     board: str
     truth: str
+    inclinometer: str
 
     def as_dict(self) -> dict[str, str]:
         return dict(self.__dict__)
@@ -130,6 +133,7 @@ class LiveSite:
         self._screen = _ScreenServer(self)
         self._laser2d = DeviceServer(LiveLaserSim(self), stream=LIVE_LASER_STREAM)
         self._laser2d.start()
+        self._inclinometer = InclinometerSim(self.true_tilt_deg, seed=seed)
         for server in (self._http, self._screen):
             threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
         http = f"http://127.0.0.1:{self._http.server_address[1]}"
@@ -137,7 +141,7 @@ class LiveSite:
                                  camera_left=f"{http}/left.mjpg", camera_right=f"{http}/right.mjpg",
                                  head=self.head_sim.url, laser=f"{http}/laser.json",
                                  laser2d=self._laser2d.url, board=f"{http}/board",
-                                 truth=f"{http}/truth.json")
+                                 truth=f"{http}/truth.json", inclinometer=self._inclinometer.url)
 
     # -- the worker that owns the site ------------------------------------------------------------------
     def _work(self, distance_m: float, mount_error: tuple[float, float]) -> None:
@@ -230,6 +234,11 @@ class LiveSite:
                 "ranges_m": [float(r) if np.isfinite(r) else None for r in scan.ranges_m],
                 "T_robot_from_laser": scan.T_robot_from_laser.tolist()}
 
+    def true_tilt_deg(self) -> tuple[float, float]:
+        """The robot's true (roll, pitch) on the site's floor, degrees (what its inclinometer measures)."""
+        roll, pitch = self.call(lambda site: roll_pitch(site.T_room_from_robot))
+        return float(np.degrees(roll)), float(np.degrees(pitch))
+
     def next_board(self, plan: str) -> dict:
         """The person puts the board at the plan's next pose."""
         if plan not in self._board_poses:
@@ -269,6 +278,7 @@ class LiveSite:
             server.shutdown()
             server.server_close()
         self._laser2d.stop()
+        self._inclinometer.close()
         self.head_sim.close()
         self._stopping.set()
         self._worker.join(timeout=5.0)

@@ -150,9 +150,13 @@ def aim_head(head: HeadModel, bias_deg: NDArray[np.float64], T_room_from_robot: 
 
 def place_in_front_of_wall(wall_T: NDArray[np.float64], wall_width: float, head: HeadModel,
                            bias_deg: NDArray[np.float64], distance_m: float, incidence_deg: float,
-                           along_m: float | None, aim_height_m: float) -> Placement:
+                           along_m: float | None, aim_height_m: float,
+                           R_level_from_robot: NDArray[np.float64] | None = None) -> Placement:
     """Robot pose and head command so the projector's centre is distance_m from the aim point on the wall,
-    its axis through that point at the given horizontal incidence, and the robot body facing along it."""
+    its axis through that point at the given horizontal incidence, and the robot body facing along it.
+    R_level_from_robot: the floor's tilt under the robot (geometry.poses.tilt_rotation; None: level), applied
+    about the robot's origin on the floor; the head is aimed for the tilted body."""
+    tilt = make_pose(R_level_from_robot)
     along = wall_width / 2.0 if along_m is None else along_m
     aim = transform_points(wall_T, [along, aim_height_m, 0.0])
     x_w, n_w = wall_T[:3, 0], wall_T[:3, 2]
@@ -160,17 +164,17 @@ def place_in_front_of_wall(wall_T: NDArray[np.float64], wall_width: float, head:
     u_h = np.cos(inc) * n_w + np.sin(inc) * x_w          # horizontal, from the wall towards the robot
     yaw = float(np.arctan2(-u_h[1], -u_h[0]))
     cmd = np.zeros(3)
-    T_room_from_robot = floor_pose(0.0, 0.0, yaw)
+    T_room_from_robot = floor_pose(0.0, 0.0, yaw) @ tilt
     for _ in range(8):
         T_robot_from_projector = head.T_robot_from_projector(cmd + bias_deg)
-        c_robot = T_robot_from_projector[:3, 3]
-        dz = aim_height_m - c_robot[2]
+        # the projector's centre from the robot's origin, in room axes (the origin stays on the floor)
+        c_room = rotation_about((0.0, 0.0, 1.0), yaw) @ tilt[:3, :3] @ T_robot_from_projector[:3, 3]
+        dz = aim_height_m - c_room[2]
         if abs(dz) >= distance_m:
             raise InputError(f"robot.distance_m = {distance_m} is shorter than the height difference "
                              f"{abs(dz):.2f} m between the projector and the aim point")
         centre = aim + np.sqrt(distance_m**2 - dz**2) * u_h
-        R = rotation_about((0.0, 0.0, 1.0), yaw)
-        xy = centre[:2] - (R @ c_robot)[:2]
-        T_room_from_robot = floor_pose(xy[0], xy[1], yaw)
+        xy = centre[:2] - c_room[:2]
+        T_room_from_robot = floor_pose(xy[0], xy[1], yaw) @ tilt
         cmd = aim_head(head, bias_deg, T_room_from_robot, aim, start_deg=cmd)
     return Placement(T_room_from_robot, cmd, aim)

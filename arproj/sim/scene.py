@@ -38,6 +38,7 @@ _RULES: dict[str, str] = {
     "room.ceiling_albedo": _FRACTION,
     "robot.distance_m": _POSITIVE, "robot.aim_height_m": _NON_NEGATIVE, "robot.footprint_radius_m": _POSITIVE,
     "robot.localization_sigma_m": _NON_NEGATIVE, "robot.localization_sigma_deg": _NON_NEGATIVE,
+    "robot.floor_tilt_sigma_deg": _NON_NEGATIVE,
     "robot.along_m": _NON_NEGATIVE,
     "head.axis_error_deg": _NON_NEGATIVE, "head.point_error_m": _NON_NEGATIVE,
     "head.angle_noise_deg": _NON_NEGATIVE, "head.backlash_deg": _NON_NEGATIVE,
@@ -68,6 +69,7 @@ _LIMITS: dict[str, tuple[float, float]] = {
     "room.height_m": (0.5, 20.0), "room.texel_m": (0.001, 0.1), "laser.resolution_deg": (0.01, 10.0),
     "laser.fov_deg": (1.0, 360.0), "laser.range_max_m": (0.1, 100.0), "robot.distance_m": (0.1, 50.0),
     "robot.aim_height_m": (0.0, 20.0), "robot.along_m": (0.0, 100.0), "robot.footprint_radius_m": (0.01, 5.0),
+    "robot.floor_tilt_sigma_deg": (0.0, 5.0),
     "rangecam.range_max_m": (0.01, 100.0), "cameras.baseline_m": (0.001, 10.0),
     "cameras.exposure_s": (1e-6, 10.0), "projector.throw_ratio": (0.05, 20.0),
 }

@@ -6,9 +6,11 @@ the exact truth of everything.
     photo.image, photo.wall_index, photo.wall_xy       # what the camera sees, and per-pixel truth
 
 Frames (geometry/frames.py): room (z up, floor z = 0) ─ wall i; room ─ robot ─ head ─ projector;
-robot ─ camera_left ─ camera_right. Everything random (textures, head imperfections, localization error,
-angle noise, sensor noise, laser and range noise) comes from named streams of one seed, so the same seed
-and the same calls give the same images.
+robot ─ camera_left ─ camera_right. The robot stands on a floor that is not quite level: each placement draws
+its true roll and pitch (robot.floor_tilt_sigma_deg), which everything rendered, cast and reported as truth
+follows; its localization knows only x, y and heading. Everything random (textures, head imperfections,
+localization error, floor tilt, angle noise, sensor noise, laser and range noise) comes from named streams of
+one seed, so the same seed and the same calls give the same images.
 """
 
 from __future__ import annotations
@@ -52,14 +54,15 @@ from arproj.sim.scene import Scene, load_scene
 from geometry.errors import InputError
 from geometry.head import HeadModel
 from geometry.intrinsics import Intrinsics
-from geometry.poses import invert, make_pose, transform_points
+from geometry.poses import invert, make_pose, roll_pitch, tilt_rotation, transform_points
 from render.distortion import distortion_map
 
 CAMERAS = ("camera_left", "camera_right")
 MIN_CLEARANCE_M = 0.05       # cameras and projector must be this far inside the room
 MAX_AIM_INCIDENCE_DEG = 85.0  # steeper than this, the projector counts as facing away from the wall
 VIEW_CACHE_SIZE = 4          # camera views kept (both cameras at two poses)
-_STREAMS = ("room", "head", "drive", "localization", "photo", "laser", "range", "sensor", "mount")
+# new streams go last: SeedSequence.spawn gives the first ones the same seeds whatever follows them
+_STREAMS = ("room", "head", "drive", "localization", "photo", "laser", "range", "sensor", "mount", "tilt")
 
 
 @dataclass
@@ -310,13 +313,22 @@ class Site:
 
     @property
     def T_room_from_robot(self) -> NDArray[np.float64]:
-        """The robot's true pose on the floor."""
+        """The robot's true pose on the floor (its floor tilt included)."""
         return self._T_room_from_robot.copy()
 
     @property
+    def floor_tilt_deg(self) -> tuple[float, float]:
+        """The robot's true (roll, pitch) against gravity in degrees (geometry.poses.roll_pitch): what a
+        perfect inclinometer on it reads."""
+        roll, pitch = roll_pitch(self._T_room_from_robot)
+        return float(np.degrees(roll)), float(np.degrees(pitch))
+
+    @property
     def localized_T_room_from_robot(self) -> NDArray[np.float64]:
-        """What the robot's own (laser) localization believes: truth with a seeded error (σ from the scene)."""
-        return self._T_room_from_robot @ self._localization_error
+        """What the robot's own (laser) localization believes: the true x, y and heading on the floor with a
+        seeded error (σ from the scene), level (a floor localization does not know the tilt)."""
+        T = self._T_room_from_robot
+        return floor_pose(T[0, 3], T[1, 3], float(np.arctan2(T[1, 0], T[0, 0]))) @ self._localization_error
 
     @property
     def head_angles_cmd_deg(self) -> NDArray[np.float64]:
@@ -376,7 +388,8 @@ class Site:
         return self._drive.command(cmd_deg).copy()
 
     def move_robot(self, T_room_from_robot: ArrayLike) -> None:
-        """Put the robot at a floor pose (its localization error is drawn anew)."""
+        """Put the robot at a pose as given, tilt included (a robot pushed from site.T_room_from_robot keeps its
+        tilt); its localization error is drawn anew."""
         T = np.asarray(T_room_from_robot, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise InputError("T_room_from_robot must be a finite 4x4 pose")
@@ -388,7 +401,8 @@ class Site:
     def place_robot(self, distance_m: float, incidence_deg: float, wall: int = 0, along_m: float | None = None,
                     aim_height_m: float | None = None, _source: str = "place_robot") -> None:
         """Put the robot in front of a wall: the projector's centre distance_m from the aim point, its axis
-        through that point at a horizontal incidence angle, the robot body facing along that axis.
+        through that point at a horizontal incidence angle, the robot body facing along that axis, standing with
+        a roll and pitch drawn anew (robot.floor_tilt_sigma_deg: the floor there is not level).
 
         along_m: aim point along the wall (default: middle); aim_height_m: default from the scene. The
         projector refocuses on the aim point when the scene's focus_distance_m is null.
@@ -406,8 +420,10 @@ class Site:
             raise InputError(f"{_source}: along_m = {along_m!r} is off wall {w.index} (0..{w.width_m:.2f} m)")
         if not 0 <= height <= w.height_m:
             raise InputError(f"{_source}: aim_height_m = {height!r} is off the wall (0..{w.height_m:.2f} m)")
+        tilt_deg = self._rng["tilt"].standard_normal(2) * self.scene["robot"]["floor_tilt_sigma_deg"]
         placement = place_in_front_of_wall(w.T_room_from_wall, w.width_m, self.head, self._drive.bias_deg,
-                                           float(distance_m), float(incidence_deg), along_m, height)
+                                           float(distance_m), float(incidence_deg), along_m, height,
+                                           tilt_rotation(*np.radians(tilt_deg)))
         what = f"{_source}: distance_m = {distance_m}, incidence_deg = {incidence_deg}, wall = {wall}"
         self._check_robot(placement.T_room_from_robot, what)
         try:

@@ -151,8 +151,8 @@ def _stop(serve: subprocess.Popen[str]) -> None:
 
 def test_site_scanned_on_devices_reopens_on_the_hardware_path(tmp_path: Path) -> None:
     """Scan on served devices writes the site file; a separate `arproj project` on the hardware path (screen,
-    cameras, head and laser at the URLs a separate `arproj devices serve --projection` prints; the rig file)
-    finds the wall again with the laser and registers as `arproj project --sim` does in one process."""
+    cameras, head, laser and inclinometer at the URLs a separate `arproj devices serve --projection` prints; the
+    rig file) finds the wall again with the laser and registers as `arproj project --sim` does in one process."""
     serve, urls = _serve(tmp_path / "urls.yaml", "--wall", WALL, "--seed", str(SEED), "--projection",
                          "--distance", str(DISTANCE_M))
     try:
@@ -171,7 +171,7 @@ def test_site_scanned_on_devices_reopens_on_the_hardware_path(tmp_path: Path) ->
                   "--json")
         served = subprocess.run(_cli("project", *common, "--screen", urls["screen"], "--left", urls["camera_left"],
                                      "--right", urls["camera_right"], "--head", urls["head"],
-                                     "--laser", urls["projection_laser"]),
+                                     "--laser", urls["projection_laser"], "--inclinometer", urls["inclinometer"]),
                                 env=ENV, capture_output=True, text=True, timeout=600)
         assert served.returncode == 0, served.stderr
     finally:
@@ -183,6 +183,7 @@ def test_site_scanned_on_devices_reopens_on_the_hardware_path(tmp_path: Path) ->
     reg, ref = hardware["registration"], in_one["registration"]
     for r in (reg, ref):
         assert "laser fix in the site's room (left and right side wall)" in r["source"], r["source"]
+        assert "inclinometer" in r["source"], r["source"]  # the served one, and --sim's own
     # the pattern was seen through the served cameras: the closed loop found its marks
     assert hardware["cycles"][0]["closed_loop_mm"]["seen"] >= 8, hardware["cycles"]
     # Two estimates of the same robot pose from independent noise (the laser's returns, the camera pictures,

@@ -6,20 +6,20 @@ import pytest
 
 from arproj.session.evaluate import true_landing_errors
 from arproj.session.output import MemoryOutput
-from arproj.session.robot_io import SimulatedRobot, nominal_rig
+from arproj.session.robot_io import DeviceInclinometer, SimulatedRobot, nominal_rig, true_tilt_deg
 from arproj.session.session import ProjectionSession
 from arproj.session.wallmap import wall_map_from_wall_file
 from devices.pelco_d import PanTiltHead
-from devices.sim import HeadSimulator
+from devices.sim import HeadSimulator, InclinometerSim
 from geometry.poses import make_pose, rotation_about
 from scanner.wall import shipped_walls
 
 pytestmark = pytest.mark.gl
 
 
-def _start(gl_context, head_zero_error_deg=(0.0, 0.0)):
+def _start(gl_context, head_zero_error_deg=(0.0, 0.0), inclinometer=True):
     """A fresh site and a session on it, aimed and updated once; the rig's head model may be off by
-    head_zero_error_deg (pan, tilt zero offsets)."""
+    head_zero_error_deg (pan, tilt zero offsets); inclinometer False: the robot has none (the floor prior)."""
     from arproj.sim.site import Site
     from geometry.head import HeadModel
     from geometry.rig import Rig
@@ -28,7 +28,11 @@ def _start(gl_context, head_zero_error_deg=(0.0, 0.0)):
     head_sim = HeadSimulator(speed_deg_s=600.0, initial_deg=tuple(site.head_angles_cmd_deg[:2]))
     head = PanTiltHead(head_sim.url, timeout_s=0.1)
     out = MemoryOutput()
-    robot = SimulatedRobot(site, 0, head_sim, head, out)
+    # the robot stands tilted on the site's floor (0.05°, -0.12°): its inclinometer measures that, as
+    # SimulatedRobot.on_site's does (with the floor prior alone the map is cut to a third here, 4-6 mm off)
+    inclinometer_sim = InclinometerSim(lambda: true_tilt_deg(site), seed=3) if inclinometer else None
+    robot = SimulatedRobot(site, 0, head_sim, head, out, inclinometer_sim=inclinometer_sim,
+                           inclinometer=None if inclinometer_sim is None else DeviceInclinometer(inclinometer_sim.url))
     wall_map = wall_map_from_wall_file(shipped_walls()["demo_brick_wall"])
     rig = nominal_rig(site)
     if any(head_zero_error_deg):
@@ -154,20 +158,30 @@ def test_marks_no_camera_can_photograph_leave_the_map_unchecked_and_refused(runn
     assert not refused.show_map and any(r.startswith("pattern lost: 0 of") for r in refused.reasons)
 
 
-def test_the_bound_covers_the_true_error_and_names_what_cuts_the_map(running):
+@pytest.mark.parametrize("inclinometer", [False, True])
+def test_the_bound_covers_the_true_error_and_names_what_cuts_the_map(gl_context, inclinometer):
+    """On the site's tilted floor (0.05°, -0.12°), with the floor prior alone and with the inclinometer."""
     from arproj.session import registration, scenarios
     from arproj.session import tolerances as tol
 
-    site, _, session, _, decision = running
-    reg = session.registration
-    trusted = reg.trusted
-    assert decision.show_map and trusted is not None and trusted.points_xy is not None
-    # every drawn sample's true error (the pose before the loop's correction) inside its own 95 % bound
-    T_uncorrected = make_pose(None, [-reg.correction_xy[0], -reg.correction_xy[1], 0.0]) @ reg.T_wall_from_projector
-    belief = scenarios.Belief(session.rig, reg.T_wall_from_robot, T_uncorrected, reg.sigma_m, reg.distance_m)
-    errors = scenarios.true_errors(belief, scenarios.truth_of(site, 0), trusted.points_xy)
-    assert np.all(errors <= tol.Z95 * trusted.point_sigma_m)
-    # the robot's roll is known from the floor alone (no wall edge in view at 2.2 m): the fused pose cuts the map
-    # there, and knowing its tilts (an inclinometer) would shrink the bound
-    assert trusted.share < 1.0 and reg.cut_by.startswith("the pose term")
-    assert f"the pose's {registration.POSE_DOFS[2]} known" in reg.cut_by and "inclinometer" in reg.cut_by
+    site, _, session, _, decision = _start(gl_context, inclinometer=inclinometer)
+    try:
+        reg = session.registration
+        trusted = reg.trusted
+        assert decision.show_map and trusted is not None and trusted.points_xy is not None
+        # every drawn sample's true error (the pose before the loop's correction) inside its own 95 % bound
+        T_uncorrected = make_pose(None, [-reg.correction_xy[0], -reg.correction_xy[1], 0.0]) \
+            @ reg.T_wall_from_projector
+        belief = scenarios.Belief(session.rig, reg.T_wall_from_robot, T_uncorrected, reg.sigma_m, reg.distance_m)
+        errors = scenarios.true_errors(belief, scenarios.truth_of(site, 0), trusted.points_xy)
+        assert np.all(errors <= tol.Z95 * trusted.point_sigma_m)
+        if inclinometer:  # the tilts measured: nothing cuts the map at 2.2 m
+            assert trusted.share == 1.0 and not reg.cut_by
+            return
+        # the robot's roll is known from the floor alone (no wall edge in view at 2.2 m): the fused pose cuts the
+        # map there, and knowing its tilts (an inclinometer) would shrink the bound
+        assert trusted.share < 1.0 and reg.cut_by.startswith("the pose term")
+        assert f"the pose's {registration.POSE_DOFS[2]} known" in reg.cut_by and "inclinometer" in reg.cut_by
+    finally:
+        session.close()
+        session.robot.close()
