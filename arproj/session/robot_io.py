@@ -9,7 +9,7 @@ inclinometer at serial URLs).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
@@ -74,6 +74,9 @@ class PoseInputs:
     extra_sigma_m: float = 0.0
     source: str = "localization"
     tilt: TiltMeasurement | None = None
+    # the fused estimate only checks the evidence (edges, laser, the plane against the map); the pose is the
+    # robot's wall_prior (the simulator's in-plane truth), so a rig the evidence contradicts is still refused
+    check_only: bool = False
 
 
 def site_pose_inputs(site_wall: SiteWall, scan_points: NDArray[np.float64], laser_origin: NDArray[np.float64],
@@ -230,19 +233,24 @@ class SimulatedRobot:
 
     def full_pose_inputs(self, normal_robot: NDArray[np.float64] | None = None) -> PoseInputs | None:
         """What the wall-pose package's full estimate fuses (plane + start pose + floor + laser), or None when the
-        in-plane part comes from truth. normal_robot: the measured plane's normal (orients a site's laser fix)."""
-        if self.prior != "measured":
+        in-plane part comes from the localization alone. With prior="truth" the same inputs, marked check_only: the
+        truth gives the pose, but what the product's own evidence contradicts is refused as on the measured path
+        (a camera mount that differs from the rig file looks to the pattern like a head that turned; only the room's
+        edges and the laser tell them apart). normal_robot: the measured plane's normal (orients a site's laser
+        fix)."""
+        if self.prior not in ("measured", "truth"):
             return None
         tilt = None if self.inclinometer is None else self.inclinometer.reading()
         if self.site_wall is not None:
-            return site_pose_inputs(self.site_wall, self.laser_points(), self.site.T_robot_from_laser[:3, 3],
-                                    normal_robot, tilt)
+            inputs = site_pose_inputs(self.site_wall, self.laser_points(), self.site.T_robot_from_laser[:3, 3],
+                                      normal_robot, tilt)
+            return replace(inputs, check_only=self.prior == "truth")
         from arproj.sim.wallpose_trial import room_map
 
         r = self.site.scene["robot"]
         return PoseInputs(room_map(self.site), self.wall_index, self.site.localized_T_room_from_robot,
                           float(r["localization_sigma_m"]), float(r["localization_sigma_deg"]), self.T_room_from_map,
-                          tilt=tilt)
+                          tilt=tilt, check_only=self.prior == "truth")
 
     def wall_prior(self) -> tuple[NDArray[np.float64], float, str]:
         if self.site_wall is not None and self.prior == "measured":

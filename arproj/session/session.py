@@ -25,7 +25,7 @@ from scipy.optimize import least_squares
 from arproj.session import gate, overlays, registration
 from arproj.session import tolerances as tol
 from arproj.session.projection import MapProjector
-from arproj.session.robot_io import RobotIO
+from arproj.session.robot_io import PoseInputs, RobotIO
 from arproj.session.wallmap import WallMap
 from calibration.stereo import sample_stereo
 from devices.errors import DeviceError
@@ -46,6 +46,9 @@ HEAD_MODEL_FALLBACK_DEG = 10.0  # projector-pose prior when the head model disag
 HEAD_MODEL_FALLBACK_M = 0.05
 STEREO_DRAWS = 48  # draws of the stereo pair from its calibration's covariance, carried into each plane estimate
 STEREO_DRAW_SEED = 20  # fixed: the same rig gives the same plane covariance every time
+# a pose given from outside and the measured one may differ at a drawn point by this many σ of the measured one
+# (a two-dimensional 99.99 % bound, as the wall-pose package's own innovation test)
+PRIOR_AGREEMENT_SIGMAS = 4.29
 LOG_LINES = 1000  # the session log keeps this many last lines (a line or two a cycle: minutes of cycles)
 # The craftsman's words (as gate.SAY_*) for a head found off its model while its encoder saw nothing: the map is
 # measured again from the pattern and still shown, but the mount slipped and a person must look at it.
@@ -249,7 +252,9 @@ class ProjectionSession:
         T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
         prior, in_plane_sigma, _ = self.robot.wall_prior()
         full = getattr(self.robot, "full_pose_inputs", lambda normal: None)(plane.normal)
-        if full is None:
+        if full is not None and full.check_only:
+            self._check_prior_against_evidence(plane, views, scan, images, full, prior)
+        if full is None or full.check_only:
             return PoseFromPlane(registration.snap_to_plane(prior, plane.normal, plane.distance),
                                  T_robot_from_projector, in_plane_sigma, 0.0, None, None, in_plane_sigma)
         pose = estimate_wall_pose(plane, full.wall_index, full.room, full.localized_T_room_from_robot,
@@ -263,6 +268,41 @@ class ProjectionSession:
         return PoseFromPlane(T_wall_from_robot, T_robot_from_projector, in_plane,
                              float(np.radians(pose.sigma_roll_deg)), "wall pose (" + ", ".join(sources) + ")",
                              pose.covariance, full.extra_sigma_m)
+
+    def _check_prior_against_evidence(self, plane: PlaneEstimate, views: ViewRig, scan: NDArray[np.float64] | None,
+                                      images: tuple[NDArray, NDArray] | None, full: PoseInputs,
+                                      prior: NDArray[np.float64]) -> None:
+        """A wall pose given from outside (full.check_only: the simulator's truth) must agree with the one the
+        product measures (plane, localization, floor, laser, the room's edges): where the projector's light
+        falls on the map, the two may differ by no more than the measured pose's uncertainty allows
+        (PRIOR_AGREEMENT_SIGMAS). A camera mount that differs from the rig file turns the measured pose with it,
+        while the given pose stays put: without this check such a rig would draw the map centimetres off and
+        its closed loop, measuring in the same wrong frame, would find nothing amiss. Raises
+        NotEnoughEvidenceError (also when the measured pose itself is declined)."""
+        T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
+        pose = estimate_wall_pose(plane, full.wall_index, full.room, full.localized_T_room_from_robot,
+                                  T_robot_from_projector, scan, full.sigma_m, full.sigma_deg,
+                                  camera_images=None if images is None else camera_images(views, *images),
+                                  projector=views.projector, tilt=full.tilt)
+        measured = pose.T_wall_from_robot if full.T_room_from_map is None else \
+            invert(full.T_room_from_map) @ pose.T_room_from_robot
+        given = registration.snap_to_plane(prior, plane.normal, plane.distance)
+        points = registration.choose_marks(measured @ T_robot_from_projector, self.projector_intr,
+                                           self.wall_map.extent, grid=(4, 3), border=0.02)
+        if not len(points) or pose.covariance is None:
+            return
+        on_wall = np.column_stack([points, np.zeros(len(points))])
+        moved = transform_points(given @ invert(measured), on_wall)[:, :2] - points
+        sigma = np.hypot(registration.pose_sigma_on_wall_m(points, measured, pose.covariance), full.extra_sigma_m)
+        worst = int(np.argmax(np.linalg.norm(moved, axis=1) / sigma))
+        apart, allowed = float(np.linalg.norm(moved[worst])), PRIOR_AGREEMENT_SIGMAS * float(sigma[worst])
+        if apart > allowed:
+            raise NotEnoughEvidenceError(
+                EvidenceCode.NO_WALL_FRAME,
+                f"the wall pose given ({self.robot.wall_prior()[2]}) puts the map {1000 * apart:.1f} mm from where "
+                f"the cameras, laser and room edges put it (at most {1000 * allowed:.1f} mm): the rig file's camera "
+                "mount may not fit this robot",
+                "recalibrate the rig (`arproj calibrate`) or check the given wall pose")
 
     def estimate(self) -> Registration | None:
         """Project the pattern, estimate the wall plane and the projector's pose; None (and pose_failure set)
