@@ -14,31 +14,18 @@ fix both cameras keep about 340 and the map is within 3 mm on all 40 seeds.
 import numpy as np
 import pytest
 
-from arproj.bench import projection as bench
 from arproj.session import scenarios
 from arproj.session import tolerances as tol
-from arproj.session.output import MemoryOutput
-from arproj.session.robot_io import SimulatedRobot, nominal_rig
-from arproj.session.session import ProjectionSession
-from arproj.session.wallmap import wall_map_from_wall
-from scanner.wall import random_wall
+from tests.support.stations import design_truth_station
 
 pytestmark = pytest.mark.gl
 
 
 @pytest.fixture(scope="module")
 def station(gl_context):
-    """The bench's design+truth station at 4 m and 30° (its site, room and wall map at seed 0)."""
-    from arproj.sim.site import Site
-
-    wall = random_wall(0, width_m=bench.WALL_SIZE_M[0], height_m=bench.WALL_SIZE_M[1], n_pipes=8, n_cables=10)
-    site = Site.build(seed=0, ctx=gl_context, room=bench.BENCH_ROOM, robot={"distance_m": 4.0, "incidence_deg": 30.0})
-    robot = SimulatedRobot.on_site(site, 0, MemoryOutput(), "truth", seed=0, head_speed_deg_s=1000.0)
-    session = ProjectionSession(nominal_rig(site), wall_map_from_wall(wall), robot, ctx=gl_context)
-    assert session.update().show_map
-    st = scenarios.Station(site, session, robot, gl_context)
-    yield st
-    st.close()
+    """The bench's design+truth station at 4 m and 30°."""
+    with design_truth_station(gl_context, 4.0, 30.0) as st:
+        yield st
 
 
 @pytest.mark.parametrize("photo_seed", [2, 18, 21])
