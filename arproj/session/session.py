@@ -250,10 +250,10 @@ class ProjectionSession:
         photos, where in view); otherwise the plane is snapped onto the robot's prior. Raises InputError
         (not enough evidence) when the fusion declines."""
         T_robot_from_projector = views.T_robot_from_camera_left @ plane.T_camera_left_from_projector
-        prior, in_plane_sigma, _ = self.robot.wall_prior()
+        prior, in_plane_sigma, prior_source = self.robot.wall_prior()
         full = getattr(self.robot, "full_pose_inputs", lambda normal: None)(plane.normal)
         if full is not None and full.check_only:
-            self._check_prior_against_evidence(plane, views, scan, images, full, prior)
+            self._check_prior_against_evidence(plane, views, scan, images, full, prior, prior_source)
         if full is None or full.check_only:
             return PoseFromPlane(registration.snap_to_plane(prior, plane.normal, plane.distance),
                                  T_robot_from_projector, in_plane_sigma, 0.0, None, None, in_plane_sigma)
@@ -271,7 +271,7 @@ class ProjectionSession:
 
     def _check_prior_against_evidence(self, plane: PlaneEstimate, views: ViewRig, scan: NDArray[np.float64] | None,
                                       images: tuple[NDArray, NDArray] | None, full: PoseInputs,
-                                      prior: NDArray[np.float64]) -> None:
+                                      prior: NDArray[np.float64], prior_source: str) -> None:
         """A wall pose given from outside (full.check_only: the simulator's truth) must agree with the one the
         product measures (plane, localization, floor, laser, the room's edges): where the projector's light
         falls on the map, the two may differ by no more than the measured pose's uncertainty allows
@@ -299,7 +299,7 @@ class ProjectionSession:
         if apart > allowed:
             raise NotEnoughEvidenceError(
                 EvidenceCode.NO_WALL_FRAME,
-                f"the wall pose given ({self.robot.wall_prior()[2]}) puts the map {1000 * apart:.1f} mm from where "
+                f"the wall pose given ({prior_source}) puts the map {1000 * apart:.1f} mm from where "
                 f"the cameras, laser and room edges put it (at most {1000 * allowed:.1f} mm): the rig file's camera "
                 "mount may not fit this robot",
                 "recalibrate the rig (`arproj calibrate`) or check the given wall pose")
