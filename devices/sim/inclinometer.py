@@ -15,14 +15,14 @@ from collections.abc import Callable
 import numpy as np
 
 from devices.sim.faults import FaultConfig
-from devices.sim.server import DeviceServer
+from devices.sim.server import DeviceServer, ServedDevice
 from devices.sim.tagged import TaggedLineSim
 
 INCLINOMETER_STREAM = 7  # its fault stream (scanner/sim/devices.py has 1, 2, 4, 5; the head 3; the live laser 6)
 SIGMA_DEG = 0.01  # the stated 1-σ per axis (a good MEMS/electrolytic two-axis sensor)
 
 
-class InclinometerSim(TaggedLineSim):
+class InclinometerSim(ServedDevice, TaggedLineSim):
     """The inclinometer's protocol over true_tilt_deg() -> (roll, pitch) degrees. Served from construction on
     (`url`); close() (or `with`) stops it."""
 
@@ -39,19 +39,6 @@ class InclinometerSim(TaggedLineSim):
         self.bias_deg = self._rng.standard_normal(2) * self.sigma_deg / math.sqrt(2.0)
         self.server = DeviceServer(self, faults, stream=INCLINOMETER_STREAM)
         self.server.start()
-
-    @property
-    def url(self) -> str:
-        return self.server.url
-
-    def close(self) -> None:
-        self.server.stop()
-
-    def __enter__(self) -> InclinometerSim:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def reading_deg(self) -> tuple[float, float]:
         """One reading (roll, pitch): truth + bias + fresh noise."""

@@ -17,7 +17,7 @@ import numpy as np
 
 from devices import pelco_d
 from devices.sim.faults import FaultConfig
-from devices.sim.server import DeviceServer, SimDevice
+from devices.sim.server import DeviceServer, ServedDevice, SimDevice
 
 HEAD_STREAM = 3  # the head's fault stream (the scanning site's simulators use 1 and 2)
 
@@ -46,7 +46,7 @@ class HeadFaults:
                            delay_s=self.reply_delay_s)
 
 
-class HeadSimulator(SimDevice):
+class HeadSimulator(ServedDevice, SimDevice):
     """Pelco-D head on a local TCP port, served from construction on. Use as a context manager (or close());
     `url` is what the driver opens."""
 
@@ -66,21 +66,8 @@ class HeadSimulator(SimDevice):
         self.server.start()
 
     @property
-    def url(self) -> str:
-        return self.server.url
-
-    @property
     def faults_injected(self) -> int:
         return sum(self.server.faults.counts.values())
-
-    def close(self) -> None:
-        self.server.stop()
-
-    def __enter__(self) -> HeadSimulator:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def drop_connections(self) -> None:
         """The head vanishes for a moment (power blip, cable); a driver that reconnects gets it back."""

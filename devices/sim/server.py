@@ -19,7 +19,7 @@ import threading
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Self
 
 from devices.link import BUSY_PREFIX, Framer
 from devices.sim.faults import FaultConfig, FaultInjector
@@ -229,3 +229,23 @@ class DeviceServer(threading.Thread):
                     conn.sendall(bytes(out))
                 except OSError:
                     return
+
+
+class ServedDevice:
+    """A simulator that owns its DeviceServer (started in its __init__): the URL it is reached at, closing it,
+    and `with`."""
+
+    server: DeviceServer
+
+    @property
+    def url(self) -> str:
+        return self.server.url
+
+    def close(self) -> None:
+        self.server.stop()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
